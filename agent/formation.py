@@ -1,0 +1,82 @@
+"""Formation references: p_di(t) = center0 + velocity t + Rot(omega t) offset_i.
+
+Offsets are in the formation frame [m], centred on the formation's centroid; robots are
+numbered in formation order (index 0 is the first robot of the scenario). The paper's line
+formation x_di = 2t + 20, y_di = 4i - 20 (i = 1..9) is ``line`` with spacing 4,
+center0 (20, 0) and velocity (2, 0).
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class FormationKind(str, enum.Enum):
+    LINE = "line"        # robots along the formation's y axis
+    WEDGE = "wedge"      # a V opening backwards (-x), apex first
+    CIRCLE = "circle"    # robots evenly on a circle, neighbours `spacing` apart
+    GRID = "grid"        # rows of ceil(sqrt(N)) robots
+    OFFSETS = "offsets"  # explicit offsets, one per robot
+
+
+WEDGE_HALF_ANGLE = math.radians(35.0)
+
+
+def formation_offsets(kind: FormationKind, n: int, spacing: float) -> np.ndarray:
+    """(n, 2) offsets [m] of a named formation, centred on their mean."""
+    if n < 1:
+        raise ValueError("formation: need at least one robot")
+    i = np.arange(n, dtype=float)
+    if kind is FormationKind.LINE:
+        off = np.column_stack([np.zeros(n), spacing * i])
+    elif kind is FormationKind.WEDGE:
+        rank = np.ceil(i / 2.0)                      # 0, 1, 1, 2, 2, ...
+        side = np.where(i % 2 == 1, 1.0, -1.0)       # odd indices left, even right
+        side[0] = 0.0
+        # robots of one arm are `spacing` apart along the arm
+        off = np.column_stack([-rank * spacing * math.cos(WEDGE_HALF_ANGLE),
+                               side * rank * spacing * math.sin(WEDGE_HALF_ANGLE)])
+    elif kind is FormationKind.CIRCLE:
+        radius = 0.0 if n == 1 else spacing / (2.0 * math.sin(math.pi / n))
+        ang = 2.0 * math.pi * i / n
+        off = radius * np.column_stack([np.cos(ang), np.sin(ang)])
+    elif kind is FormationKind.GRID:
+        cols = math.ceil(math.sqrt(n))
+        off = spacing * np.column_stack([-(i // cols), i % cols])
+    else:
+        raise ValueError(f"formation: kind {kind.value!r} needs explicit offsets")
+    return off - off.mean(axis=0)
+
+
+@dataclass(frozen=True)
+class Formation:
+    """A rigid formation moving with constant velocity [m/s] and turn rate omega [rad/s]."""
+
+    offsets: np.ndarray           # (N, 2) m, formation frame
+    center0: tuple[float, float]  # m, centre at t = 0 (the mission epoch)
+    velocity: tuple[float, float] = (0.0, 0.0)
+    omega: float = 0.0
+
+    def reference(self, t: float, idx: np.ndarray | slice = slice(None)
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """(p_d, p_d_dot): reference positions [m] and velocities [m/s] at time t [s]."""
+        off = self.offsets[idx]
+        c, s = math.cos(self.omega * t), math.sin(self.omega * t)
+        rot = np.array([[c, -s], [s, c]])
+        r_off = off @ rot.T
+        p = np.asarray(self.center0) + np.asarray(self.velocity) * t + r_off
+        # d/dt Rot(wt) off = w J Rot(wt) off, J = [[0,-1],[1,0]]
+        pdot = np.asarray(self.velocity) + self.omega * np.column_stack([-r_off[:, 1],
+                                                                          r_off[:, 0]])
+        return p, pdot
+
+    def min_spacing(self) -> float:
+        """Smallest distance [m] between two reference positions (inf for one robot)."""
+        n = len(self.offsets)
+        if n < 2:
+            return math.inf
+        d = np.linalg.norm(self.offsets[:, None, :] - self.offsets[None, :, :], axis=-1)
+        return float(d[~np.eye(n, dtype=bool)].min())

@@ -1,0 +1,189 @@
+"""The bounded formation control law of Nguyen & La, made precise (see DESIGN.md).
+
+Theory of operation. Every period each robot picks one of three modes:
+
+* AVOID (Theorem 2) when a neighbour is closer than b (closer than b + hysteresis while it
+  is already avoiding one) or an obstacle surface is closer than b. The robot descends the
+  potential sum V = K_ij ln cosh(r - c) of those neighbours and obstacle virtual agents, with
+  any component into a close obstacle removed: theta_d = atan2(-g), u = -K_theta e_theta,
+  v = K cos(e_theta) min(D_max, |g|).
+* ROTATE when not avoiding and an obstacle within c blocks the straight path to the
+  reference (the segment passes within b of its surface), or while a circulation side is
+  latched. Heading is the obstacle's tangent on the side facing the reference; the side is
+  latched until the path is clear of every obstacle within 2c, and a corner rule hands over
+  to a neighbouring obstacle that turns the robot further out. Speed law as in TRACK.
+* TRACK (Theorem 1) otherwise: e = p - p_d, theta_d = atan2(-e), u = -K_theta e_theta +
+  theta_d_hat_dot, v = K cos(e_theta) min(D_max, |e|).
+
+Finally |u| is clipped to u_max; |v| <= K D_max holds by construction.
+
+The law is pure: arrays in, arrays out. Its mode memory (previous error, hysteresis flag,
+latched side and followed obstacle) is explicit state in :class:`LawMemory`.
+"""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.avoidance import (EPS, corner_takeover, potential_gradient, remove_toward,
+                             segment_distance, tangent_side, unit_or)
+from agent.config import ControlParams
+from agent.kinematics import wrap_angle
+
+
+class Mode(enum.IntEnum):
+    TRACK = 0
+    AVOID = 1
+    ROTATE = 2
+
+
+@dataclass(frozen=True)
+class LawMemory:
+    """Per-robot mode memory carried from one period to the next (all arrays length N)."""
+
+    prev_error: np.ndarray       # (N, 2) m, e(t - T)
+    has_prev: np.ndarray         # (N,) bool, False before the first step
+    avoiding: np.ndarray         # (N,) bool, in neighbour-AVOID (hysteresis)
+    side: np.ndarray             # (N,) int8, latched circulation side (+1, -1) or 0
+    followed_center: np.ndarray  # (N, 2) m, centre of the obstacle being circled
+    followed_radius: np.ndarray  # (N,) m
+
+    @classmethod
+    def initial(cls, n: int) -> "LawMemory":
+        return cls(prev_error=np.zeros((n, 2)), has_prev=np.zeros(n, bool),
+                   avoiding=np.zeros(n, bool), side=np.zeros(n, np.int8),
+                   followed_center=np.zeros((n, 2)), followed_radius=np.zeros(n))
+
+    def take(self, idx: np.ndarray) -> "LawMemory":
+        """The memory of robots ``idx`` only."""
+        return LawMemory(*(getattr(self, f)[idx] for f in self.__dataclass_fields__))
+
+
+@dataclass(frozen=True)
+class LawInput:
+    """What one period of the law sees, padded per robot.
+
+    pose (N, 3) [m, m, rad]; ref (N, 2) [m]: the robot's reference p_d(t);
+    nbr_pos (N, M, 2) [m] with nbr_valid (N, M): neighbours in sensing range (already
+    extrapolated to now); obs_center (N, K, 2) [m], obs_radius (N, K) [m] with obs_valid
+    (N, K): obstacles in sensing range.
+    """
+
+    pose: np.ndarray
+    ref: np.ndarray
+    nbr_pos: np.ndarray
+    nbr_valid: np.ndarray
+    obs_center: np.ndarray
+    obs_radius: np.ndarray
+    obs_valid: np.ndarray
+
+
+@dataclass(frozen=True)
+class LawOutput:
+    v: np.ndarray       # (N,) m/s
+    u: np.ndarray       # (N,) rad/s
+    mode: np.ndarray    # (N,) int8, values of Mode
+    memory: LawMemory
+
+
+def _heading_law(theta: np.ndarray, theta_d: np.ndarray, dist: np.ndarray, p: ControlParams
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(e_theta, v): e_theta = wrap(theta - theta_d) (0 where dist ~ 0) and v = K cos(e) min."""
+    e_th = np.where(dist < EPS, 0.0, wrap_angle(theta - theta_d))
+    return e_th, p.K * np.cos(e_th) * np.minimum(p.D_max, dist)
+
+
+def control_step(inp: LawInput, mem: LawMemory, params: ControlParams,
+                 dt: float | None = None) -> LawOutput:
+    """One period of the law for N robots. ``dt`` [s] defaults to ``params.period``."""
+    p = params
+    dt = p.period if dt is None else dt
+    pos, theta = inp.pose[:, :2], inp.pose[:, 2]
+    n = len(pos)
+    rows = np.arange(n)
+
+    # --- tracking error and its finite-difference heading rate (Assumption 2)
+    e = pos - inp.ref
+    D = np.linalg.norm(e, axis=1)
+    e_prev = np.where(mem.has_prev[:, None], mem.prev_error, e)
+    e_dot = (e - e_prev) / dt
+    theta_d_dot = np.where(D > EPS, (e[:, 0] * e_dot[:, 1] - e[:, 1] * e_dot[:, 0])
+                           / np.maximum(D * D, EPS), 0.0)
+
+    # --- neighbours and obstacles around each robot
+    nbr_dist = np.where(inp.nbr_valid,
+                        np.linalg.norm(inp.nbr_pos - pos[:, None, :], axis=-1), np.inf)
+    to_obs = inp.obs_center - pos[:, None, :]
+    obs_cdist = np.linalg.norm(to_obs, axis=-1)
+    obs_clear = np.where(inp.obs_valid, obs_cdist - inp.obs_radius, np.inf)
+    obs_out = -to_obs / np.maximum(obs_cdist, EPS)[..., None]
+    phi = np.arctan2(to_obs[..., 1], to_obs[..., 0])          # robot -> obstacle centre
+
+    # --- AVOID decision with hysteresis on the neighbour part
+    reach = np.where(mem.avoiding, p.b + p.hysteresis, p.b)
+    nbr_active = nbr_dist < reach[:, None]
+    obs_active = obs_clear < p.b
+    avoiding = nbr_active.any(axis=1)
+    avoid = avoiding | obs_active.any(axis=1)
+
+    # --- ROTATE decision: blocked path, latched side, corner rule
+    seg = segment_distance(pos, inp.ref, inp.obs_center)
+    on_path = inp.obs_valid & (seg < inp.obs_radius + p.b)
+    blocking = on_path & (obs_clear < p.c)
+    clear_2c = ~(on_path & (obs_clear < 2.0 * p.c)).any(axis=1)
+
+    side = np.where(clear_2c, 0, mem.side).astype(np.int8)
+    k = inp.obs_valid.shape[1]
+    if k:
+        match = np.where(inp.obs_valid,
+                         np.linalg.norm(inp.obs_center - mem.followed_center[:, None, :],
+                                        axis=-1), np.inf)
+        followed = np.argmin(match, axis=1)
+        side = np.where(match[rows, followed] <= np.maximum(mem.followed_radius, EPS),
+                        side, 0).astype(np.int8)          # followed obstacle out of sight
+        nearest_blocking = np.argmin(np.where(blocking, obs_clear, np.inf), axis=1)
+        start = (side == 0) & ~avoid & blocking.any(axis=1)
+        beta = np.arctan2(-e[:, 1], -e[:, 0])
+        new_side = tangent_side(phi[rows, nearest_blocking], beta)
+        followed = np.where(start, nearest_blocking, followed)
+        side = np.where(start, new_side, side).astype(np.int8)
+        rotate = ~avoid & (side != 0)
+        if rotate.any():
+            takeover = corner_takeover(followed, np.where(side == 0, 1, side), phi,
+                                       inp.obs_center, inp.obs_radius, obs_clear,
+                                       inp.obs_valid, p.b, p.c)
+            followed = np.where(rotate, takeover, followed)
+        followed_center = np.where((side != 0)[:, None], inp.obs_center[rows, followed],
+                                   mem.followed_center)
+        followed_radius = np.where(side != 0, inp.obs_radius[rows, followed],
+                                   mem.followed_radius)
+        theta_rot = phi[rows, followed] + side * (np.pi / 2)
+    else:
+        side = np.zeros(n, np.int8)
+        rotate = np.zeros(n, bool)
+        followed_center, followed_radius = mem.followed_center, mem.followed_radius
+        theta_rot = theta
+
+    # --- AVOID heading: descend the potential, never into a close obstacle
+    g = potential_gradient(pos, theta, inp.nbr_pos, nbr_dist, nbr_active,
+                           obs_out, obs_clear, obs_active, p.K_ij, p.c)
+    to_nbr = unit_or(inp.nbr_pos - pos[:, None, :], nbr_dist, np.zeros((n, 1, 2)))
+    descent = remove_toward(-g, to_nbr, nbr_dist < p.b)
+    descent = remove_toward(descent, -obs_out, obs_active)
+    force = np.linalg.norm(descent, axis=1)
+
+    theta_d = np.where(avoid, np.arctan2(descent[:, 1], descent[:, 0]),
+                       np.where(rotate, theta_rot, np.arctan2(-e[:, 1], -e[:, 0])))
+    dist = np.where(avoid, force, D)
+    e_theta, v = _heading_law(theta, theta_d, dist, p)
+    u = -p.K_theta * e_theta + np.where(avoid | rotate, 0.0, theta_d_dot)
+    u = np.clip(u, -p.u_max, p.u_max)
+
+    mode = np.where(avoid, Mode.AVOID, np.where(rotate, Mode.ROTATE, Mode.TRACK)
+                    ).astype(np.int8)
+    memory = LawMemory(prev_error=e, has_prev=np.ones(n, bool), avoiding=avoiding,
+                       side=side, followed_center=followed_center,
+                       followed_radius=followed_radius)
+    return LawOutput(v=v, u=u, mode=mode, memory=memory)

@@ -1,0 +1,118 @@
+"""Ground-truth metrics of a run: safety (distances, collisions) and convergence.
+
+Fed as the run goes (no full trajectory needed, so it serves 10 000-robot batch runs and
+SITL alike): :meth:`RunMetrics.observe_geometry` at every physics (sub)step,
+:meth:`RunMetrics.observe_control` at every control period. :meth:`RunMetrics.summary` gives
+the ``metrics.json`` dictionary of DESIGN.md.
+
+Convergence tolerance per robot: |p_d_dot| / K + 0.25 m (the law has no feed-forward, so a
+robot trails its reference by |p_d_dot| / K in steady state).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+TOLERANCE_MARGIN = 0.25  # m, added to the steady-state lag |p_d_dot| / K
+
+
+def tolerance(ref_vel: np.ndarray, K: float) -> np.ndarray:
+    """Per-robot convergence tolerance [m] for reference velocities (N, 2) [m/s]."""
+    return np.linalg.norm(ref_vel, axis=-1) / K + TOLERANCE_MARGIN
+
+
+@dataclass
+class RunMetrics:
+    """Accumulates the metrics of one run of robots ``ids`` with collision distance ``a``."""
+
+    ids: np.ndarray
+    a: float
+    min_pair_distance: float = math.inf
+    min_obstacle_clearance: float = math.inf
+    max_abs_v: float = 0.0
+    max_abs_u: float = 0.0
+    mode_switches: int = 0
+    colliding_pairs: set = field(default_factory=set)
+    robots_in_obstacles: set = field(default_factory=set)
+    geometry_t: list = field(default_factory=list)
+    geometry_dmin: list = field(default_factory=list)
+    geometry_clear: list = field(default_factory=list)
+    _last_mode: np.ndarray | None = None
+    _last_bad_t: float | None = None
+    _seen_t: list = field(default_factory=list)
+    _final_err: np.ndarray | None = None
+    _final_within: np.ndarray | None = None
+
+    def observe_geometry(self, t: float, pos: np.ndarray, pairs: np.ndarray,
+                         clearance: np.ndarray) -> None:
+        """Robot positions (N, 2) at time t [s]; ``pairs`` (P, 2) of robots to check (all
+        pairs that could be closer than the sensing range); ``clearance`` (N, K') robot to
+        obstacle surface [m], inf where no obstacle."""
+        d = np.linalg.norm(pos[pairs[:, 0]] - pos[pairs[:, 1]], axis=-1)
+        dmin = float(d.min()) if len(d) else math.inf
+        cmin = float(clearance.min()) if clearance.size else math.inf
+        self.min_pair_distance = min(self.min_pair_distance, dmin)
+        self.min_obstacle_clearance = min(self.min_obstacle_clearance, cmin)
+        if dmin < self.a:
+            for i, j in pairs[d < self.a]:
+                self.colliding_pairs.add((int(self.ids[i]), int(self.ids[j])))
+        if cmin < 0.0:
+            inside = np.flatnonzero((clearance < 0.0).any(axis=1))
+            self.robots_in_obstacles.update(int(self.ids[i]) for i in inside)
+        self.geometry_t.append(t)
+        self.geometry_dmin.append(dmin)
+        self.geometry_clear.append(cmin)
+
+    def observe_control(self, t: float, error: np.ndarray, tol: np.ndarray, v: np.ndarray,
+                        u: np.ndarray, mode: np.ndarray) -> None:
+        """Tracking error norms (N,) [m] against tolerances (N,), commands and modes at t."""
+        self.max_abs_v = max(self.max_abs_v, float(np.abs(v).max(initial=0.0)))
+        self.max_abs_u = max(self.max_abs_u, float(np.abs(u).max(initial=0.0)))
+        if self._last_mode is not None:
+            self.mode_switches += int(np.count_nonzero(mode != self._last_mode))
+        self._last_mode = mode.copy()
+        within = error <= tol
+        if not within.all():
+            self._last_bad_t = t
+        self._seen_t.append(t)
+        self._final_err, self._final_within = error, within
+
+    @property
+    def convergence_time(self) -> float | None:
+        """Earliest observed t [s] after which every robot stays within tolerance."""
+        if self._final_within is None or not self._final_within.all():
+            return None
+        if self._last_bad_t is None:
+            return self._seen_t[0]
+        later = [t for t in self._seen_t if t > self._last_bad_t]
+        return later[0] if later else None
+
+    def summary(self, scenario: str, duration: float) -> dict:
+        conv = self.convergence_time
+        stuck = [] if self._final_within is None else \
+            [int(i) for i in self.ids[~self._final_within]]
+        return {
+            "scenario": scenario,
+            "robots": int(len(self.ids)),
+            "duration": float(duration),
+            "min_pair_distance": _finite_or_none(self.min_pair_distance),
+            "min_obstacle_clearance": _finite_or_none(self.min_obstacle_clearance),
+            "max_abs_v": self.max_abs_v,
+            "max_abs_u": self.max_abs_u,
+            "converged": conv is not None,
+            "convergence_time": conv,
+            "final_max_tracking_error": (None if self._final_err is None
+                                         else float(self._final_err.max(initial=0.0))),
+            "collisions": len(self.colliding_pairs) + len(self.robots_in_obstacles),
+            "colliding_pairs": sorted(self.colliding_pairs),
+            "robots_in_obstacles": sorted(self.robots_in_obstacles),
+            "stuck_robots": stuck,
+            "mode_switches": self.mode_switches,
+        }
+
+
+def _finite_or_none(x: float) -> float | None:
+    """JSON has no infinity: a distance never observed (no pair in range) is null."""
+    return float(x) if math.isfinite(x) else None

@@ -1,0 +1,1 @@
+"""Tools around the loop: the boundswarm CLI, scenario files, run folders, figures."""

@@ -1,0 +1,223 @@
+"""Scenario files (TOML): robots, formation, obstacles, controller and robot parameters.
+
+Format (DESIGN.md, plus the optional ``[robot]`` and ``[sim]`` tables)::
+
+    name = "paper"
+    duration = 20.0                 # s
+    [control]                       # agent.config.ControlParams, all optional
+    [robot]                         # agent.config.RobotParams, all optional
+    [sim]                           # sensing_range (m, default 2c), substeps, plant
+    [formation]                     # kind, spacing, center0, velocity, omega, offsets
+    [[robots]]                      # id, pose = [x, y, theta], in formation order
+    [[obstacles]]                   # center = [x, y], radius
+
+Every problem is reported as :class:`ScenarioError` naming the file and the field.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agent.config import ConfigError, ControlParams, RobotParams, from_table
+from agent.formation import Formation, FormationKind, formation_offsets
+from firmware_sim.plant import PlantKind
+from firmware_sim.world import Obstacles
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+
+class ScenarioError(ValueError):
+    """A scenario file is unreadable, or a field in it is missing or wrong."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    duration: float             # s
+    control: ControlParams
+    robot: RobotParams
+    formation: Formation
+    ids: np.ndarray             # (N,) int
+    poses: np.ndarray           # (N, 3) m, m, rad
+    obstacles: Obstacles
+    sensing_range: float        # m
+    substeps: int
+    plant: PlantKind
+    source: Path | None = None
+
+
+TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles"}
+
+
+class _Reader:
+    """Typed access to TOML values with messages that name the file and the field."""
+
+    def __init__(self, where: str):
+        self.where = where
+
+    def fail(self, field: str, msg: str) -> ScenarioError:
+        return ScenarioError(f"{self.where}: {field}: {msg}")
+
+    def number(self, table: dict, key: str, field: str, default: float | None = None,
+               positive: bool = False) -> float:
+        if key not in table:
+            if default is None:
+                raise self.fail(field, "missing")
+            return default
+        value = table[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            raise self.fail(field, f"expected a finite number, got {value!r}")
+        if positive and value <= 0:
+            raise self.fail(field, f"must be > 0, got {value!r}")
+        return float(value)
+
+    def vector(self, table: dict, key: str, field: str, size: int,
+               default: tuple | None = None) -> tuple[float, ...]:
+        if key not in table:
+            if default is None:
+                raise self.fail(field, "missing")
+            return default
+        value = table[key]
+        if not isinstance(value, list) or len(value) != size or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                for x in value):
+            raise self.fail(field, f"expected a list of {size} finite numbers, got {value!r}")
+        return tuple(float(x) for x in value)
+
+    def table(self, doc: dict, key: str) -> dict:
+        value = doc.get(key, {})
+        if not isinstance(value, dict):
+            raise self.fail(f"[{key}]", f"expected a table, got {value!r}")
+        return value
+
+    def array_of_tables(self, doc: dict, key: str, required: bool) -> list[dict]:
+        value = doc.get(key, [])
+        if not isinstance(value, list) or not all(isinstance(x, dict) for x in value):
+            raise self.fail(f"[[{key}]]", "expected an array of tables")
+        if required and not value:
+            raise self.fail(f"[[{key}]]", "missing: at least one entry is required")
+        return value
+
+    def only(self, table: dict, allowed: set[str], field: str) -> None:
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise self.fail(field, f"unknown field(s) {', '.join(unknown)}; "
+                                   f"allowed: {', '.join(sorted(allowed))}")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read scenario file: {exc.strerror}") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    return parse_scenario(doc, str(path), source=path)
+
+
+def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) -> Scenario:
+    """Validate a scenario already parsed from TOML; ``where`` names it in messages."""
+    rd = _Reader(where)
+    rd.only(doc, TOP_KEYS, "top level")
+    name = doc.get("name")
+    if not isinstance(name, str) or not name:
+        raise rd.fail("name", f"expected a non-empty string, got {name!r}")
+    duration = rd.number(doc, "duration", "duration", positive=True)
+    try:
+        control = from_table(ControlParams, rd.table(doc, "control"), f"{where} [control]")
+        robot = from_table(RobotParams, rd.table(doc, "robot"), f"{where} [robot]")
+    except ConfigError as exc:
+        raise ScenarioError(str(exc)) from None
+
+    robots = rd.array_of_tables(doc, "robots", required=True)
+    ids, poses = [], []
+    for i, r in enumerate(robots):
+        field = f"robots[{i}]"
+        rd.only(r, {"id", "pose"}, field)
+        rid = r.get("id")
+        if isinstance(rid, bool) or not isinstance(rid, int) or rid < 0:
+            raise rd.fail(f"{field}.id", f"expected a non-negative integer, got {rid!r}")
+        if rid in ids:
+            raise rd.fail(f"{field}.id", f"duplicate robot id {rid}")
+        ids.append(rid)
+        poses.append(rd.vector(r, "pose", f"{field}.pose", 3))
+
+    formation = _formation(rd, rd.table(doc, "formation"), len(ids), control)
+
+    obs = rd.array_of_tables(doc, "obstacles", required=False)
+    centers, radii = [], []
+    for i, o in enumerate(obs):
+        field = f"obstacles[{i}]"
+        rd.only(o, {"center", "radius"}, field)
+        centers.append(rd.vector(o, "center", f"{field}.center", 2))
+        radii.append(rd.number(o, "radius", f"{field}.radius", positive=True))
+    obstacles = Obstacles(np.array(centers, dtype=float).reshape(-1, 2),
+                          np.array(radii, dtype=float))
+
+    sim = rd.table(doc, "sim")
+    rd.only(sim, {"sensing_range", "substeps", "plant"}, "[sim]")
+    sensing = rd.number(sim, "sensing_range", "[sim] sensing_range", default=2.0 * control.c,
+                        positive=True)
+    if sensing < 2.0 * control.c:
+        raise rd.fail("[sim] sensing_range", f"must be >= 2c = {2 * control.c:g} m "
+                                             f"(ROTATE looks 2c ahead), got {sensing:g}")
+    substeps = sim.get("substeps", 4)
+    if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
+        raise rd.fail("[sim] substeps", f"expected a positive integer, got {substeps!r}")
+    try:
+        plant = PlantKind(sim.get("plant", "ideal"))
+    except ValueError:
+        raise rd.fail("[sim] plant", f"expected one of {[k.value for k in PlantKind]}, "
+                                     f"got {sim.get('plant')!r}") from None
+
+    return Scenario(name=name, duration=duration, control=control, robot=robot,
+                    formation=formation, ids=np.array(ids, dtype=int),
+                    poses=np.array(poses, dtype=float), obstacles=obstacles,
+                    sensing_range=sensing, substeps=substeps, plant=plant, source=source)
+
+
+def _formation(rd: _Reader, table: dict, n: int, control: ControlParams) -> Formation:
+    rd.only(table, {"kind", "spacing", "center0", "velocity", "omega", "offsets"},
+            "[formation]")
+    try:
+        kind = FormationKind(table.get("kind", "line"))
+    except ValueError:
+        raise rd.fail("[formation] kind", f"expected one of "
+                      f"{[k.value for k in FormationKind]}, got {table.get('kind')!r}") from None
+    if kind is FormationKind.OFFSETS:
+        raw = table.get("offsets")
+        if not isinstance(raw, list) or len(raw) != n:
+            raise rd.fail("[formation] offsets", f"expected one [x, y] per robot ({n}), "
+                                                 f"got {raw!r}")
+        offsets = np.array([rd.vector({"o": o}, "o", f"[formation] offsets[{i}]", 2)
+                            for i, o in enumerate(raw)])
+    else:
+        if "offsets" in table:
+            raise rd.fail("[formation] offsets", "only allowed with kind = \"offsets\"")
+        spacing = rd.number(table, "spacing", "[formation] spacing", default=4.0,
+                            positive=True)
+        offsets = formation_offsets(kind, n, spacing)
+    formation = Formation(
+        offsets=offsets,
+        center0=rd.vector(table, "center0", "[formation] center0", 2, default=(0.0, 0.0)),
+        velocity=rd.vector(table, "velocity", "[formation] velocity", 2, default=(0.0, 0.0)),
+        omega=rd.number(table, "omega", "[formation] omega", default=0.0))
+    need = control.b + control.hysteresis
+    if formation.min_spacing() <= need:
+        raise rd.fail("[formation]", f"two places are {formation.min_spacing():.3g} m apart; "
+                                     f"they must be more than b + hysteresis = {need:g} m "
+                                     f"apart or the robots never stop avoiding each other")
+    return formation

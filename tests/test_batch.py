@@ -1,0 +1,134 @@
+"""Closed-loop tests of the batch simulator on simulated time (deterministic)."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agent.config import ControlParams, RobotParams
+from agent.formation import Formation, FormationKind, formation_offsets
+from firmware_sim.batch import SimOptions, simulate
+from firmware_sim.plant import PlantKind
+from firmware_sim.world import Obstacles
+from hil.scenario import load_scenario
+
+SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
+
+
+def run(sc, **kw):
+    opts = dict(duration=sc.duration, sensing_range=sc.sensing_range, substeps=sc.substeps,
+                plant=sc.plant)
+    opts.update(kw)
+    res = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
+                   SimOptions(**opts))
+    return res, res.metrics.summary(sc.name, opts["duration"])
+
+
+def test_paper_example():
+    sc = load_scenario(SCENARIOS / "paper.toml")
+    res, m = run(sc)
+    p = sc.control
+    assert m["converged"] and m["convergence_time"] <= 10.0
+    assert m["min_pair_distance"] > p.a and m["min_obstacle_clearance"] > p.a
+    assert m["max_abs_u"] <= p.u_max + 1e-9 and m["max_abs_v"] <= p.K * p.D_max + 1e-9
+    assert m["collisions"] == 0
+    # the independent implementation's figures (DESIGN.md)
+    assert m["min_pair_distance"] == pytest.approx(1.97, abs=0.05)
+    assert m["convergence_time"] == pytest.approx(7.3, abs=0.5)
+    # robots trail their references by |p_d_dot|/K = 0.5 m in steady state
+    assert m["final_max_tracking_error"] == pytest.approx(0.5, abs=0.01)
+    assert {1, 2} <= set(np.unique(res.mode))           # obstacles were avoided/passed
+
+
+def test_paper_example_with_wheel_limits():
+    sc = load_scenario(SCENARIOS / "paper.toml")
+    _, m = run(sc, plant=PlantKind.WHEELS)
+    assert m["converged"] and m["collisions"] == 0 and m["min_pair_distance"] > 1.0
+
+
+@pytest.mark.parametrize("name", ["head_on_swap", "narrow_gap", "wedge", "circle", "grid"])
+def test_bundled_scenarios_converge_safely(name):
+    sc = load_scenario(SCENARIOS / f"{name}.toml")
+    _, m = run(sc)
+    assert m["collisions"] == 0 and m["min_pair_distance"] > sc.control.a
+    assert m["converged"], m["stuck_robots"]
+
+
+@pytest.mark.parametrize("lateral", [0.0, 0.3, -1.0])
+def test_head_on_swap_resolves(lateral):
+    poses = np.array([[-10, 0, 0.0], [10, lateral, math.pi]])
+    form = Formation(np.array([[10.0, 0], [-10.0, 0]]), (0.0, 0.0))
+    res = simulate(np.array([1, 2]), poses, form, Obstacles.empty(), ControlParams(),
+                   RobotParams(), SimOptions(duration=20.0))
+    m = res.metrics.summary("swap", 20.0)
+    assert m["converged"] and m["min_pair_distance"] > 1.0
+    assert res.pose[-1, 0, 0] > 9 and res.pose[-1, 1, 0] < -9   # they did swap
+
+
+def test_robots_starting_inside_each_others_avoidance_region_separate():
+    poses = np.array([[0, 0, 0.0], [0.5, 1.2, 1.0], [1.0, -0.3, 2.0]])
+    form = Formation(np.array([[0.0, 0], [0, 4], [0, -4]]), (20.0, 0.0))
+    res = simulate(np.array([1, 2, 3]), poses, form, Obstacles.empty(), ControlParams(),
+                   RobotParams(), SimOptions(duration=15.0))
+    m = res.metrics.summary("inside", 15.0)
+    assert res.mode[0].tolist() == [1, 1, 1]              # all start in AVOID
+    assert m["collisions"] == 0 and m["min_pair_distance"] > 1.0 and m["converged"]
+
+
+def sparse_field(rng, n, kind, c=4.0, b=2.0):
+    """Robots left of a band of obstacles (gaps >= 2c), formation ending past the band."""
+    obstacles = []
+    while len(obstacles) < 6:
+        centre, r = rng.uniform([-10, -25], [25, 25]), rng.uniform(1.0, 3.5)
+        if all(np.linalg.norm(centre - oc) - r - orr >= 2 * c for oc, orr in obstacles):
+            obstacles.append((centre, r))
+    poses = []
+    while len(poses) < n:
+        p = rng.uniform([-75, -30], [-35, 30])
+        if all(np.linalg.norm(p - q[:2]) >= b for q in poses):
+            poses.append(np.array([*p, rng.uniform(-math.pi, math.pi)]))
+    spacing = 5.0            # >= 2 (b + hysteresis): a robot can pass between two others
+    form = Formation(formation_offsets(kind, n, spacing), (-35.0, 0.0), (2.0, 0.0))
+    return np.array(poses), form, Obstacles(np.array([o[0] for o in obstacles]),
+                                            np.array([o[1] for o in obstacles]))
+
+
+@pytest.mark.parametrize("seed, n, kind", [(1, 9, FormationKind.LINE),
+                                           (2, 12, FormationKind.WEDGE),
+                                           (3, 16, FormationKind.GRID),
+                                           (4, 10, FormationKind.CIRCLE),
+                                           (5, 30, FormationKind.GRID),
+                                           (6, 30, FormationKind.LINE)])
+def test_random_sparse_fields(seed, n, kind):
+    rng = np.random.default_rng(seed)
+    poses, form, obstacles = sparse_field(rng, n, kind)
+    res = simulate(np.arange(1, n + 1), poses, form, obstacles, ControlParams(),
+                   RobotParams(), SimOptions(duration=50.0, record_every=0))
+    m = res.metrics.summary("field", 50.0)
+    assert m["collisions"] == 0 and m["min_pair_distance"] > 1.0
+    assert m["min_obstacle_clearance"] > 1.0
+    assert m["converged"], f"not converged: {m['stuck_robots']}"
+
+
+def test_deterministic():
+    sc = load_scenario(SCENARIOS / "paper.toml")
+    a, _ = run(sc, duration=3.0)
+    b, _ = run(sc, duration=3.0)
+    assert np.array_equal(a.pose, b.pose)
+
+
+def test_progress_is_reported():
+    sc = load_scenario(SCENARIOS / "paper.toml")
+    seen = []
+    simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
+             SimOptions(duration=1.0), progress=seen.append)
+    assert seen[0] == 0.0 and seen[-1] == 1.0 and seen == sorted(seen) and len(seen) > 10
+
+
+def test_bad_options_are_refused():
+    with pytest.raises(ValueError, match="duration"):
+        SimOptions(duration=-1.0)
+    sc = load_scenario(SCENARIOS / "paper.toml")
+    with pytest.raises(ValueError, match="formation has 9 places for 2 robots"):
+        simulate(sc.ids[:2], sc.poses[:2], sc.formation, sc.obstacles, sc.control, sc.robot,
+                 SimOptions(duration=1.0))

@@ -1,0 +1,46 @@
+import math
+
+import numpy as np
+import pytest
+
+from agent.formation import Formation, FormationKind, formation_offsets
+
+
+def test_paper_line_formation():
+    f = Formation(formation_offsets(FormationKind.LINE, 9, 4.0), (20.0, 0.0), (2.0, 0.0))
+    for t in (0.0, 3.5, 20.0):
+        p, v = f.reference(t)
+        i = np.arange(1, 10)
+        assert p[:, 0] == pytest.approx(2 * t + 20)
+        assert p[:, 1] == pytest.approx(4 * i - 20)
+        assert v == pytest.approx(np.tile([2.0, 0.0], (9, 1)))
+
+
+@pytest.mark.parametrize("kind", [FormationKind.LINE, FormationKind.WEDGE,
+                                  FormationKind.CIRCLE, FormationKind.GRID])
+@pytest.mark.parametrize("n", [1, 2, 5, 9, 16])
+def test_named_formations_are_centred_and_spaced(kind, n):
+    off = formation_offsets(kind, n, 3.0)
+    assert off.shape == (n, 2)
+    assert off.mean(axis=0) == pytest.approx([0.0, 0.0], abs=1e-12)
+    if n > 1:
+        f = Formation(off, (0.0, 0.0))
+        assert f.min_spacing() == pytest.approx(3.0)
+
+
+def test_rotating_formation_velocity_is_the_derivative():
+    f = Formation(formation_offsets(FormationKind.CIRCLE, 6, 4.0), (1.0, 2.0), (0.5, -0.2),
+                  omega=0.3)
+    t, h = 2.0, 1e-6
+    p1, v = f.reference(t)
+    p2, _ = f.reference(t + h)
+    assert (p2 - p1) / h == pytest.approx(v, abs=1e-5)
+    # rigid: distances between references do not change
+    d0 = np.linalg.norm(f.reference(0.0)[0][0] - f.reference(0.0)[0][3])
+    assert np.linalg.norm(p1[0] - p1[3]) == pytest.approx(d0)
+
+
+def test_offsets_kind_needs_explicit_offsets():
+    with pytest.raises(ValueError, match="explicit offsets"):
+        formation_offsets(FormationKind.OFFSETS, 3, 1.0)
+    assert math.isinf(Formation(np.zeros((1, 2)), (0.0, 0.0)).min_spacing())

@@ -1,0 +1,204 @@
+"""Unit tests of the three-mode bounded law and each of DESIGN.md's additions."""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from agent.config import ControlParams
+from agent.law import LawMemory, Mode
+from lawcase import single, step
+
+P = ControlParams()
+
+
+def motion(out, theta):
+    """Direction of travel (v cos theta, v sin theta) of robot 0."""
+    return out.v[0] * np.array([math.cos(theta), math.sin(theta)])
+
+
+def test_track_far_from_reference_drives_toward_it_at_full_speed():
+    out = step(single([0, 0, 0], [20, 0]))
+    assert out.mode[0] == Mode.TRACK
+    assert out.v[0] == pytest.approx(P.K * P.D_max)
+    assert out.u[0] == pytest.approx(0.0)
+
+
+def test_track_speed_is_proportional_near_the_reference():
+    out = step(single([0, 0, 0], [0.5, 0]))
+    assert out.v[0] == pytest.approx(P.K * 0.5)
+
+
+def test_at_the_reference_the_law_is_at_rest():
+    out = step(single([3, 4, 1.0], [3, 4]))
+    assert out.v[0] == 0.0 and out.u[0] == 0.0
+
+
+@pytest.mark.parametrize("turns", [-3, -1, 1, 2])
+def test_e_theta_is_wrapped(turns):
+    base = step(single([0, 0, 0.3], [10, 0]))
+    wound = step(single([0, 0, 0.3 + 2 * math.pi * turns], [10, 0]))
+    assert wound.u[0] == pytest.approx(base.u[0])
+    assert wound.v[0] == pytest.approx(base.v[0])
+    assert base.u[0] == pytest.approx(-P.K_theta * 0.3)
+
+
+def test_robot_behind_its_reference_turns_and_reverses():
+    # reference behind: e_theta = pi, cos = -1, the robot backs toward it
+    out = step(single([0, 0, 0], [-1, 0]))
+    assert out.v[0] == pytest.approx(-P.K * 1.0)
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.7, math.pi, -2.0])
+def test_robot_closer_than_b_moves_away_from_its_neighbour(theta):
+    pose, nbr = np.array([0.0, 0.0, theta]), np.array([1.5, 0.0])
+    out = step(single(pose, [-30, 0], nbrs=[nbr]))
+    assert out.mode[0] == Mode.AVOID
+    # the motion has a component away from the neighbour, unless the robot is broadside
+    # to it (then it first turns)
+    away = motion(out, theta) @ (pose[:2] - nbr)
+    if abs(math.cos(theta)) > 0.1:
+        assert away > 0
+
+
+def test_avoid_speed_follows_the_potential_gradient():
+    r = 1.5
+    out = step(single([0, 0, math.pi], [30, 0], nbrs=[[r, 0]]))
+    grad = P.K_ij * abs(math.tanh(r - P.c))
+    assert out.v[0] == pytest.approx(P.K * min(P.D_max, grad))   # facing away: e_theta = 0
+    assert out.u[0] == pytest.approx(0.0)
+
+
+def test_hysteresis_on_neighbour_avoidance():
+    inp = single([0, 0, 0], [20, 0], nbrs=[[P.b + 0.25, 0]])
+    fresh = step(inp)
+    assert fresh.mode[0] == Mode.TRACK                 # entering needs r < b
+    avoiding = dataclasses.replace(LawMemory.initial(1), avoiding=np.array([True]))
+    held = step(inp, avoiding)
+    assert held.mode[0] == Mode.AVOID                  # leaving needs r > b + hysteresis
+    released = step(single([0, 0, 0], [20, 0], nbrs=[[P.b + P.hysteresis + 0.1, 0]]),
+                    avoiding)
+    assert released.mode[0] == Mode.TRACK
+
+
+def test_obstacle_closer_than_b_triggers_avoid_away_from_it():
+    # obstacle surface 1.5 m ahead; reference beyond it
+    out = step(single([0, 0, math.pi], [20, 0], obstacles=[((4.5, 0), 3.0)]))
+    assert out.mode[0] == Mode.AVOID
+    assert motion(out, math.pi) @ np.array([-1.0, 0.0]) > 0
+
+
+def test_obstacle_priority_removes_the_push_into_an_obstacle():
+    # two neighbours on the left push the robot right, into an obstacle 1.5 m to its right
+    inp = single([0, 0, 0], [0, 30], nbrs=[[-1.2, 0.3], [-1.2, -0.3]],
+                 obstacles=[((4.5, 0), 3.0)])
+    out = step(inp)
+    assert out.mode[0] == Mode.AVOID
+    for theta in np.linspace(-math.pi, math.pi, 13):
+        o = step(single([0, 0, theta], [0, 30], nbrs=[[-1.2, 0.3], [-1.2, -0.3]],
+                        obstacles=[((4.5, 0), 3.0)]))
+        assert motion(o, theta)[0] <= 1e-9            # never toward the obstacle (+x)
+
+
+def test_rotate_heads_along_the_obstacle_tangent():
+    obstacle = ((0.0, 0.0), 3.0)
+    pos = np.array([-5.5, 0.5])                        # surface 2.5 m away: b < 2.5 < c
+    phi = math.atan2(-pos[1], -pos[0])
+    tangent = phi + math.pi / 2                        # reference right of the obstacle,
+    out = step(single([*pos, tangent], [10, 0], obstacles=[obstacle]))   # robot above it
+    assert out.mode[0] == Mode.ROTATE
+    assert out.u[0] == pytest.approx(0.0, abs=1e-12)   # already on the tangent
+    assert out.v[0] > 0
+    assert out.memory.side[0] == 1
+    # the other side of the obstacle picks the other tangent
+    below = step(single([-5.5, -0.5, 0.0], [10, 0], obstacles=[obstacle]))
+    assert below.memory.side[0] == -1
+
+
+def test_rotate_tangent_has_a_positive_component_toward_the_reference():
+    for y in np.linspace(-2.5, 2.5, 11):
+        pos = np.array([-5.6, y])
+        out = step(single([*pos, 0.0], [12, -y / 2], obstacles=[((0, 0), 3.0)]))
+        assert out.mode[0] == Mode.ROTATE
+        theta_d = 0.0 + out.u[0] / P.K_theta           # u = -K_theta (0 - theta_d), unclipped
+        ref_dir = np.array([12, -y / 2]) - pos
+        if abs(out.u[0]) < P.u_max:
+            assert np.array([math.cos(theta_d), math.sin(theta_d)]) @ ref_dir > 0
+
+
+def test_no_rotate_when_the_path_is_clear():
+    out = step(single([-5.5, 6.0, 0.0], [10, 6.0], obstacles=[((0, 0), 3.0)]))
+    assert out.mode[0] == Mode.TRACK
+    assert out.memory.side[0] == 0
+
+
+def test_latched_side_kept_until_the_path_is_clear():
+    obstacle = [((0.0, 0.0), 3.0)]
+    first = step(single([-5.5, 0.5, 0.0], [10, 0], obstacles=obstacle))
+    assert first.memory.side[0] == 1
+    # now below the axis: a fresh robot would pick side -1, the latched one keeps +1
+    fresh = step(single([-5.5, -0.8, 0.0], [10, 0], obstacles=obstacle))
+    assert fresh.memory.side[0] == -1
+    kept = step(single([-5.5, -0.8, 0.0], [10, 0], obstacles=obstacle), first.memory)
+    assert kept.mode[0] == Mode.ROTATE and kept.memory.side[0] == 1
+    # past the obstacle, the straight path to the reference is clear: latch released
+    clear = step(single([4.0, 3.6, 0.0], [10, 5.0], obstacles=obstacle), kept.memory)
+    assert clear.memory.side[0] == 0 and clear.mode[0] == Mode.TRACK
+
+
+def test_latch_survives_an_avoid_episode():
+    obstacle = [((0.0, 0.0), 3.0)]
+    first = step(single([-5.5, 0.5, 0.0], [10, 0], obstacles=obstacle))
+    avoid = step(single([-5.5, -0.8, 0.0], [10, 0], nbrs=[[-5.5, -2.0]], obstacles=obstacle),
+                 first.memory)
+    assert avoid.mode[0] == Mode.AVOID and avoid.memory.side[0] == 1
+
+
+def test_corner_rule_hands_over_to_the_obstacle_ahead():
+    # going north past A (A on the right, side +1); B ahead on the right, close to A
+    a, b_ = ((0.0, 0.0), 3.0), ((-1.0, 5.5), 1.5)
+    first = step(single([-5.5, 0.5, 1.5], [10, 2], obstacles=[a]))
+    assert first.mode[0] == Mode.ROTATE and first.memory.side[0] == 1
+    both = step(single([-5.2, 2.5, 1.5], [10, 2], obstacles=[a, b_]), first.memory)
+    assert both.mode[0] == Mode.ROTATE
+    assert tuple(both.memory.followed_center[0]) == (-1.0, 5.5)
+    assert both.memory.side[0] == 1
+    # an obstacle on the other (left) side does not take over
+    left = step(single([-5.2, 2.5, 1.5], [10, 2], obstacles=[a, ((-9.5, 4.0), 1.5)]),
+                first.memory)
+    assert tuple(left.memory.followed_center[0]) == (0.0, 0.0)
+
+
+def test_u_is_clipped():
+    # the reference jumped across the robot: the finite-difference heading rate is huge
+    mem = dataclasses.replace(LawMemory.initial(1), prev_error=np.array([[0.0, -0.01]]),
+                              has_prev=np.array([True]))
+    out = step(single([0, 0, 0], [-0.01, 0.0]), mem)
+    assert abs(out.u[0]) == pytest.approx(P.u_max)
+    small = ControlParams(u_max=1.0)
+    assert abs(step(single([0, 0, 0], [0, 5]), params=small).u[0]) == pytest.approx(1.0)
+
+
+def test_heading_rate_feed_forward_from_the_error_difference():
+    # the error rotates by 0.01 rad in one period: theta_d_dot = 0.5 rad/s
+    e_prev = np.array([[-10 * math.cos(-0.01), -10 * math.sin(-0.01)]])
+    mem = dataclasses.replace(LawMemory.initial(1), prev_error=e_prev,
+                              has_prev=np.array([True]))
+    out = step(single([0, 0, 0], [10, 0]), mem)
+    assert out.u[0] == pytest.approx(0.01 / P.period, rel=1e-3)
+
+
+def test_the_law_is_vectorised_row_by_row():
+    rng = np.random.default_rng(3)
+    cases = [single([*rng.uniform(-5, 5, 2), rng.uniform(-3, 3)], rng.uniform(-9, 9, 2),
+                    nbrs=[rng.uniform(-3, 3, 2)], obstacles=[((0.0, 0.0), 1.5)])
+             for _ in range(6)]
+    stacked = dataclasses.replace(
+        cases[0], **{f.name: np.concatenate([getattr(c, f.name) for c in cases])
+                     for f in dataclasses.fields(cases[0])})
+    together = step(stacked)
+    for i, c in enumerate(cases):
+        alone = step(c)
+        assert together.v[i] == pytest.approx(alone.v[0])
+        assert together.u[i] == pytest.approx(alone.u[0])
+        assert together.mode[i] == alone.mode[0]

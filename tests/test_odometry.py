@@ -1,0 +1,27 @@
+import math
+
+import numpy as np
+import pytest
+
+from agent.config import RobotParams
+from agent.odometry import Odometry
+from firmware_sim.plant import WheelPlant
+
+
+def test_odometry_from_encoders_matches_the_plant_truth():
+    robot = RobotParams()
+    plant = WheelPlant(robot, 1)
+    truth = np.array([[1.0, -2.0, 0.4]])
+    odo = Odometry(robot.wheel_radius, robot.wheel_base, truth[0].copy())
+    enc = np.zeros(2)                                    # encoder positions [rev]
+    odo.update(*enc)
+    dt = 0.005
+    rng = np.random.default_rng(0)
+    for k in range(2000):
+        if k % 200 == 0:
+            v, u = rng.uniform(-8, 8), rng.uniform(-4, 4)
+        truth, _, _ = plant.step(truth, np.array([v]), np.array([u]), dt)
+        enc = enc + plant.wheel_rev_s[0] * dt             # encoders integrate actual speed
+        est = odo.update(*enc)
+    assert est[:2] == pytest.approx(truth[0, :2], abs=1e-6)
+    assert math.cos(est[2] - truth[0, 2]) == pytest.approx(1.0, abs=1e-9)

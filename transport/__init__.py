@@ -1,0 +1,1 @@
+"""The links: CAN to the motor drivers, Zenoh between agents, MAVLink to ground stations."""
