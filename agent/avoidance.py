@@ -18,29 +18,28 @@ from agent.kinematics import wrap_angle
 EPS = 1e-9
 
 
-def unit_or(vec: np.ndarray, norm: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """vec / norm along the last axis, or ``fallback`` where the norm is ~0."""
-    small = norm < EPS
-    safe = np.where(small, 1.0, norm)
-    return np.where(small[..., None], fallback, vec / safe[..., None])
-
-
-def potential_gradient(pos: np.ndarray, heading: np.ndarray,
-                       nbr_pos: np.ndarray, nbr_dist: np.ndarray, nbr_active: np.ndarray,
-                       obs_out: np.ndarray, obs_clear: np.ndarray, obs_active: np.ndarray,
-                       K_ij: float, c: float) -> np.ndarray:
+def potential_gradient(heading: np.ndarray, toward: np.ndarray, nbr_dist: np.ndarray,
+                       nbr_active: np.ndarray, obs_out: np.ndarray, obs_clear: np.ndarray,
+                       obs_active: np.ndarray, K_ij: float, c: float) -> np.ndarray:
     """g = grad_{p_i} sum V over active neighbours and obstacle virtual agents, (N, 2).
 
-    ``obs_out`` (N, K, 2) is the unit vector from each obstacle centre to the robot and
-    ``obs_clear`` the distance to its surface. Two robots at the same point push each robot
-    backwards along its own heading (a deterministic, finite choice).
+    ``toward`` (N, M, 2) is the unit vector from the robot to each neighbour (zero where
+    they coincide), ``nbr_dist`` their distance; ``obs_out`` (N, K, 2) the unit vector from
+    each obstacle centre to the robot and ``obs_clear`` the distance to its surface. A
+    neighbour at the robot's own position pushes it backwards along its own heading (a
+    deterministic, finite choice).
     """
-    back = -np.stack([np.cos(heading), np.sin(heading)], axis=-1)[:, None, :]
-    away = unit_or(pos[:, None, :] - nbr_pos, nbr_dist, back)
     w_n = np.where(nbr_active, K_ij * np.tanh(np.where(nbr_active, nbr_dist, c) - c), 0.0)
     w_o = np.where(obs_active,
                    K_ij * np.tanh(np.maximum(np.where(obs_active, obs_clear, c), 0.0) - c), 0.0)
-    return (w_n[..., None] * away).sum(axis=1) + (w_o[..., None] * obs_out).sum(axis=1)
+    # grad of r_ij w.r.t. p_i is -toward; tanh(r - c) < 0 for r < c, so g points toward
+    g = -(w_n[..., None] * toward).sum(axis=1) + (w_o[..., None] * obs_out).sum(axis=1)
+    same = (nbr_active & (nbr_dist < EPS)).any(axis=1)
+    if same.any():
+        back = -np.column_stack([np.cos(heading[same]), np.sin(heading[same])])
+        w_same = np.where(nbr_active & (nbr_dist < EPS), w_n, 0.0)[same].sum(axis=1)
+        g[same] += w_same[:, None] * back
+    return g
 
 
 def remove_toward(direction: np.ndarray, toward: np.ndarray, active: np.ndarray
@@ -65,7 +64,8 @@ def segment_distance(start: np.ndarray, end: np.ndarray, points: np.ndarray) -> 
     rel = points - start[:, None, :]
     len2 = np.einsum("ikj,ikj->ik", seg, seg)
     t = np.clip(np.einsum("ikj,ikj->ik", rel, seg) / np.maximum(len2, EPS), 0.0, 1.0)
-    return np.linalg.norm(rel - t[..., None] * seg, axis=-1)
+    gap = rel - t[..., None] * seg
+    return np.hypot(gap[..., 0], gap[..., 1])
 
 
 def tangent_side(phi: np.ndarray, beta: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent.avoidance import (EPS, corner_takeover, potential_gradient, remove_toward,
-                             segment_distance, tangent_side, unit_or)
+                             segment_distance, tangent_side)
 from agent.config import ControlParams
 from agent.kinematics import wrap_angle
 
@@ -95,6 +95,45 @@ def _heading_law(theta: np.ndarray, theta_d: np.ndarray, dist: np.ndarray, p: Co
     return e_th, p.K * np.cos(e_th) * np.minimum(p.D_max, dist)
 
 
+def _rotation(e: np.ndarray, to_obs: np.ndarray, obs_clear: np.ndarray, inp_ref: np.ndarray,
+              pos: np.ndarray, centers: np.ndarray, radii: np.ndarray, valid: np.ndarray,
+              avoid: np.ndarray, mem_side: np.ndarray, mem_center: np.ndarray,
+              mem_radius: np.ndarray, p: ControlParams):
+    """ROTATE decision for robots that see at least one obstacle (arrays of those rows).
+
+    Returns (rotate, side, followed centre, followed radius, tangent heading theta_d).
+    """
+    rows = np.arange(len(pos))
+    phi = np.arctan2(to_obs[..., 1], to_obs[..., 0])          # robot -> obstacle centre
+    seg = segment_distance(pos, inp_ref, centers)
+    on_path = valid & (seg < radii + p.b)
+    blocking = on_path & (obs_clear < p.c)
+    clear_2c = ~(on_path & (obs_clear < 2.0 * p.c)).any(axis=1)
+
+    # keep a latched side while its obstacle is in sight and the path is not clear
+    off = centers - mem_center[:, None, :]
+    match = np.where(valid, np.hypot(off[..., 0], off[..., 1]), np.inf)
+    followed = np.argmin(match, axis=1)
+    in_sight = match[rows, followed] <= np.maximum(mem_radius, EPS)
+    side = np.where(clear_2c | ~in_sight, 0, mem_side).astype(np.int8)
+
+    # latch a new side on the obstacle that blocks the path
+    nearest_blocking = np.argmin(np.where(blocking, obs_clear, np.inf), axis=1)
+    start = (side == 0) & ~avoid & blocking.any(axis=1)
+    new_side = tangent_side(phi[rows, nearest_blocking], np.arctan2(-e[:, 1], -e[:, 0]))
+    followed = np.where(start, nearest_blocking, followed)
+    side = np.where(start, new_side, side).astype(np.int8)
+    rotate = ~avoid & (side != 0)
+    r = np.flatnonzero(rotate)
+    if r.size:
+        followed[r] = corner_takeover(followed[r], side[r], phi[r], centers[r], radii[r],
+                                      obs_clear[r], valid[r], p.b, p.c)
+    latched = side != 0
+    center = np.where(latched[:, None], centers[rows, followed], mem_center)
+    radius = np.where(latched, radii[rows, followed], mem_radius)
+    return rotate, side, center, radius, phi[rows, followed] + side * (np.pi / 2)
+
+
 def control_step(inp: LawInput, mem: LawMemory, params: ControlParams,
                  dt: float | None = None) -> LawOutput:
     """One period of the law for N robots. ``dt`` [s] defaults to ``params.period``."""
@@ -102,88 +141,63 @@ def control_step(inp: LawInput, mem: LawMemory, params: ControlParams,
     dt = p.period if dt is None else dt
     pos, theta = inp.pose[:, :2], inp.pose[:, 2]
     n = len(pos)
-    rows = np.arange(n)
 
-    # --- tracking error and its finite-difference heading rate (Assumption 2)
+    # --- TRACK for everyone: error and its finite-difference heading rate (Assumption 2)
     e = pos - inp.ref
-    D = np.linalg.norm(e, axis=1)
+    D = np.hypot(e[:, 0], e[:, 1])
     e_prev = np.where(mem.has_prev[:, None], mem.prev_error, e)
     e_dot = (e - e_prev) / dt
-    theta_d_dot = np.where(D > EPS, (e[:, 0] * e_dot[:, 1] - e[:, 1] * e_dot[:, 0])
-                           / np.maximum(D * D, EPS), 0.0)
+    feed_forward = np.where(D > EPS, (e[:, 0] * e_dot[:, 1] - e[:, 1] * e_dot[:, 0])
+                            / np.maximum(D * D, EPS), 0.0)
+    theta_d = np.arctan2(-e[:, 1], -e[:, 0])
+    dist = D.copy()
+    mode = np.full(n, Mode.TRACK, np.int8)
 
     # --- neighbours and obstacles around each robot
-    nbr_dist = np.where(inp.nbr_valid,
-                        np.linalg.norm(inp.nbr_pos - pos[:, None, :], axis=-1), np.inf)
+    to_nbr = inp.nbr_pos - pos[:, None, :]
+    nbr_d2 = np.where(inp.nbr_valid, to_nbr[..., 0] ** 2 + to_nbr[..., 1] ** 2, np.inf)
     to_obs = inp.obs_center - pos[:, None, :]
-    obs_cdist = np.linalg.norm(to_obs, axis=-1)
+    obs_cdist = np.hypot(to_obs[..., 0], to_obs[..., 1])
     obs_clear = np.where(inp.obs_valid, obs_cdist - inp.obs_radius, np.inf)
-    obs_out = -to_obs / np.maximum(obs_cdist, EPS)[..., None]
-    phi = np.arctan2(to_obs[..., 1], to_obs[..., 0])          # robot -> obstacle centre
 
-    # --- AVOID decision with hysteresis on the neighbour part
+    # --- AVOID decision, with hysteresis on the neighbour part
     reach = np.where(mem.avoiding, p.b + p.hysteresis, p.b)
-    nbr_active = nbr_dist < reach[:, None]
+    nbr_active = nbr_d2 < (reach * reach)[:, None]
     obs_active = obs_clear < p.b
     avoiding = nbr_active.any(axis=1)
     avoid = avoiding | obs_active.any(axis=1)
 
-    # --- ROTATE decision: blocked path, latched side, corner rule
-    seg = segment_distance(pos, inp.ref, inp.obs_center)
-    on_path = inp.obs_valid & (seg < inp.obs_radius + p.b)
-    blocking = on_path & (obs_clear < p.c)
-    clear_2c = ~(on_path & (obs_clear < 2.0 * p.c)).any(axis=1)
+    # --- ROTATE decision, for robots that see an obstacle
+    side = np.zeros(n, np.int8)
+    center, radius = mem.followed_center.copy(), mem.followed_radius.copy()
+    rot = np.flatnonzero(inp.obs_valid.any(axis=1))
+    if rot.size:
+        rotate, side[rot], center[rot], radius[rot], theta_rot = _rotation(
+            e[rot], to_obs[rot], obs_clear[rot], inp.ref[rot], pos[rot], inp.obs_center[rot],
+            inp.obs_radius[rot], inp.obs_valid[rot], avoid[rot], mem.side[rot],
+            mem.followed_center[rot], mem.followed_radius[rot], p)
+        rot = rot[rotate]
+        theta_d[rot] = theta_rot[rotate]
+        mode[rot] = Mode.ROTATE
+        feed_forward[rot] = 0.0
 
-    side = np.where(clear_2c, 0, mem.side).astype(np.int8)
-    k = inp.obs_valid.shape[1]
-    if k:
-        match = np.where(inp.obs_valid,
-                         np.linalg.norm(inp.obs_center - mem.followed_center[:, None, :],
-                                        axis=-1), np.inf)
-        followed = np.argmin(match, axis=1)
-        side = np.where(match[rows, followed] <= np.maximum(mem.followed_radius, EPS),
-                        side, 0).astype(np.int8)          # followed obstacle out of sight
-        nearest_blocking = np.argmin(np.where(blocking, obs_clear, np.inf), axis=1)
-        start = (side == 0) & ~avoid & blocking.any(axis=1)
-        beta = np.arctan2(-e[:, 1], -e[:, 0])
-        new_side = tangent_side(phi[rows, nearest_blocking], beta)
-        followed = np.where(start, nearest_blocking, followed)
-        side = np.where(start, new_side, side).astype(np.int8)
-        rotate = ~avoid & (side != 0)
-        if rotate.any():
-            takeover = corner_takeover(followed, np.where(side == 0, 1, side), phi,
-                                       inp.obs_center, inp.obs_radius, obs_clear,
-                                       inp.obs_valid, p.b, p.c)
-            followed = np.where(rotate, takeover, followed)
-        followed_center = np.where((side != 0)[:, None], inp.obs_center[rows, followed],
-                                   mem.followed_center)
-        followed_radius = np.where(side != 0, inp.obs_radius[rows, followed],
-                                   mem.followed_radius)
-        theta_rot = phi[rows, followed] + side * (np.pi / 2)
-    else:
-        side = np.zeros(n, np.int8)
-        rotate = np.zeros(n, bool)
-        followed_center, followed_radius = mem.followed_center, mem.followed_radius
-        theta_rot = theta
+    # --- AVOID: descend the potential, never toward a close obstacle or neighbour
+    av = np.flatnonzero(avoid)
+    if av.size:
+        obs_out = -to_obs[av] / np.maximum(obs_cdist[av], EPS)[..., None]
+        nd = np.sqrt(nbr_d2[av])
+        toward = to_nbr[av] / np.where(nd < EPS, np.inf, nd)[..., None]
+        g = potential_gradient(theta[av], toward, nd, nbr_active[av], obs_out, obs_clear[av],
+                               obs_active[av], p.K_ij, p.c)
+        descent = remove_toward(-g, toward, nd < p.b)
+        descent = remove_toward(descent, -obs_out, obs_active[av])
+        theta_d[av] = np.arctan2(descent[:, 1], descent[:, 0])
+        dist[av] = np.hypot(descent[:, 0], descent[:, 1])
+        mode[av] = Mode.AVOID
+        feed_forward[av] = 0.0
 
-    # --- AVOID heading: descend the potential, never into a close obstacle
-    g = potential_gradient(pos, theta, inp.nbr_pos, nbr_dist, nbr_active,
-                           obs_out, obs_clear, obs_active, p.K_ij, p.c)
-    to_nbr = unit_or(inp.nbr_pos - pos[:, None, :], nbr_dist, np.zeros((n, 1, 2)))
-    descent = remove_toward(-g, to_nbr, nbr_dist < p.b)
-    descent = remove_toward(descent, -obs_out, obs_active)
-    force = np.linalg.norm(descent, axis=1)
-
-    theta_d = np.where(avoid, np.arctan2(descent[:, 1], descent[:, 0]),
-                       np.where(rotate, theta_rot, np.arctan2(-e[:, 1], -e[:, 0])))
-    dist = np.where(avoid, force, D)
     e_theta, v = _heading_law(theta, theta_d, dist, p)
-    u = -p.K_theta * e_theta + np.where(avoid | rotate, 0.0, theta_d_dot)
-    u = np.clip(u, -p.u_max, p.u_max)
-
-    mode = np.where(avoid, Mode.AVOID, np.where(rotate, Mode.ROTATE, Mode.TRACK)
-                    ).astype(np.int8)
+    u = np.clip(-p.K_theta * e_theta + feed_forward, -p.u_max, p.u_max)
     memory = LawMemory(prev_error=e, has_prev=np.ones(n, bool), avoiding=avoiding,
-                       side=side, followed_center=followed_center,
-                       followed_radius=followed_radius)
+                       side=side, followed_center=center, followed_radius=radius)
     return LawOutput(v=v, u=u, mode=mode, memory=memory)

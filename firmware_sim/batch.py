@@ -18,7 +18,7 @@ from agent.formation import Formation
 from agent.law import LawInput, LawMemory, control_step
 from firmware_sim.metrics import RunMetrics, tolerance
 from firmware_sim.plant import PlantKind, make_plant
-from firmware_sim.world import Obstacles, sense
+from firmware_sim.world import Obstacles, Sensed, Sensing
 
 TRAJECTORY_COLUMNS = ("t", "id", "x", "y", "theta", "v", "u", "mode", "x_d", "y_d")
 
@@ -89,13 +89,16 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     dt = T / options.substeps
     report_every = max(1, steps // 100)
     law_seconds = 0.0
+    sensing = Sensing(obstacles, options.sensing_range)
+    step_reach = max(control.v_max, robot.v_wheel_max) * T   # m, farthest move per period
 
     for k in range(steps + 1):
         t = k * T
         ref, ref_vel = formation.reference(t)
-        seen = sense(pose[:, :2], obstacles, options.sensing_range)
+        seen = sensing(pose[:, :2])
         inp = LawInput(pose=pose, ref=ref,
-                       nbr_pos=pose[seen.nbr_idx, :2], nbr_valid=seen.nbr_valid,
+                       nbr_pos=np.take(np.ascontiguousarray(pose[:, :2]), seen.nbr_idx, axis=0),
+                       nbr_valid=seen.nbr_valid,
                        obs_center=obstacles.centers[seen.obs_idx],
                        obs_radius=obstacles.radii[seen.obs_idx], obs_valid=seen.obs_valid)
         t0 = clock() if clock else 0.0
@@ -103,19 +106,20 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         if clock:
             law_seconds += clock() - t0
         memory = out.memory
-        err = np.linalg.norm(pose[:, :2] - ref, axis=1)
+        err = np.hypot(pose[:, 0] - ref[:, 0], pose[:, 1] - ref[:, 1])
         metrics.observe_control(t, err, tolerance(ref_vel, control.K), out.v, out.u, out.mode)
         if every and k % every == 0:
             r = k // every
             rec_t[r], rec_pose[r], rec_v[r], rec_u[r] = t, pose, out.v, out.u
             rec_mode[r], rec_ref[r] = out.mode, ref
+        watch = _Watch(pose[:, :2], seen, obstacles, control.a, step_reach)
         if k == 0:
-            _observe(metrics, t, pose, seen, obstacles)
+            watch.observe(metrics, t, pose)
         if k == steps:
             break
         for s in range(1, options.substeps + 1):
             pose, _, _ = plant.step(pose, out.v, out.u, dt)
-            _observe(metrics, t + s * dt, pose, seen, obstacles)
+            watch.observe(metrics, t + s * dt, pose)
         if progress and k % report_every == 0:
             progress(k / steps)
     if progress:
@@ -124,15 +128,35 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
                      ref=rec_ref, metrics=metrics, law_seconds=law_seconds)
 
 
-def _observe(metrics: RunMetrics, t: float, pose: np.ndarray, seen, obstacles: Obstacles
-             ) -> None:
-    """Distances of the pairs and obstacles in sensing range at the step start (robots move
-    at most K*D_max*T per period, far less than the sensing range)."""
-    pos = pose[:, :2]
-    if seen.obs_valid.size:
-        clear = np.where(seen.obs_valid,
-                         np.linalg.norm(pos[:, None, :] - obstacles.centers[seen.obs_idx],
-                                        axis=-1) - obstacles.radii[seen.obs_idx], np.inf)
-    else:
-        clear = np.zeros((len(pos), 0))
-    metrics.observe_geometry(t, pos, seen.pairs, clear)
+class _Watch:
+    """The pairs and robot-obstacle entries worth checking during one control period.
+
+    Robots move at most ``v_bound * T`` per period, so a pair farther apart at the start than
+    max(closest pair, a) + 4 v_bound T can be neither the closest pair nor closer than a during
+    the period (likewise for obstacles with 2 v_bound T): the minimum and the collisions found
+    on the watched subset at every physics step are exact.
+    """
+
+    def __init__(self, pos: np.ndarray, seen: Sensed, obstacles: Obstacles, a: float,
+                 step_reach: float):
+        d = seen.pair_dist
+        keep = d <= max(float(d.min(initial=np.inf)), a) + 4.0 * step_reach
+        self.pairs = seen.pairs[keep]
+        clear = self._clear(pos, seen.obs_idx, seen.obs_valid, obstacles)
+        low = clear.min(axis=1, initial=np.inf)
+        self.robots = np.flatnonzero(low <= max(float(low.min(initial=np.inf)), 0.0)
+                                     + 2.0 * step_reach)
+        self.obs_idx = seen.obs_idx[self.robots]
+        self.obs_valid = seen.obs_valid[self.robots]
+        self.obstacles = obstacles
+
+    @staticmethod
+    def _clear(pos, idx, valid, obstacles) -> np.ndarray:
+        rel = pos[:, None, :] - obstacles.centers[idx]
+        return np.where(valid, np.hypot(rel[..., 0], rel[..., 1]) - obstacles.radii[idx],
+                        np.inf)
+
+    def observe(self, metrics: RunMetrics, t: float, pose: np.ndarray) -> None:
+        pos = pose[:, :2]
+        clear = self._clear(pos[self.robots], self.obs_idx, self.obs_valid, self.obstacles)
+        metrics.observe_geometry(t, pos, self.pairs, self.robots, clear)

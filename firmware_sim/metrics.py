@@ -20,7 +20,7 @@ TOLERANCE_MARGIN = 0.25  # m, added to the steady-state lag |p_d_dot| / K
 
 def tolerance(ref_vel: np.ndarray, K: float) -> np.ndarray:
     """Per-robot convergence tolerance [m] for reference velocities (N, 2) [m/s]."""
-    return np.linalg.norm(ref_vel, axis=-1) / K + TOLERANCE_MARGIN
+    return np.hypot(ref_vel[..., 0], ref_vel[..., 1]) / K + TOLERANCE_MARGIN
 
 
 @dataclass
@@ -46,11 +46,11 @@ class RunMetrics:
     _final_within: np.ndarray | None = None
 
     def observe_geometry(self, t: float, pos: np.ndarray, pairs: np.ndarray,
-                         clearance: np.ndarray) -> None:
-        """Robot positions (N, 2) at time t [s]; ``pairs`` (P, 2) of robots to check (all
-        pairs that could be closer than the sensing range); ``clearance`` (N, K') robot to
-        obstacle surface [m], inf where no obstacle."""
-        d = np.linalg.norm(pos[pairs[:, 0]] - pos[pairs[:, 1]], axis=-1)
+                         robots: np.ndarray, clearance: np.ndarray) -> None:
+        """Robot positions (N, 2) at time t [s]; ``pairs`` (P, 2) of robots to check (every
+        pair that could be the closest or closer than a); ``clearance`` (R, K) [m] from
+        robots ``robots`` (R,) to obstacle surfaces, inf where there is none."""
+        d = np.hypot(*(pos[pairs[:, 0]] - pos[pairs[:, 1]]).T)
         dmin = float(d.min()) if len(d) else math.inf
         cmin = float(clearance.min()) if clearance.size else math.inf
         self.min_pair_distance = min(self.min_pair_distance, dmin)
@@ -59,7 +59,7 @@ class RunMetrics:
             for i, j in pairs[d < self.a]:
                 self.colliding_pairs.add((int(self.ids[i]), int(self.ids[j])))
         if cmin < 0.0:
-            inside = np.flatnonzero((clearance < 0.0).any(axis=1))
+            inside = robots[(clearance < 0.0).any(axis=1)]
             self.robots_in_obstacles.update(int(self.ids[i]) for i in inside)
         self.geometry_t.append(t)
         self.geometry_dmin.append(dmin)

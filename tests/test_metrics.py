@@ -36,9 +36,9 @@ def test_collisions_count_pairs_and_robots_inside_obstacles():
     m = RunMetrics(ids=np.array([1, 2, 3]), a=1.0)
     pos = np.array([[0.0, 0.0], [0.5, 0.0], [5.0, 0.0]])
     pairs = np.array([[0, 1], [1, 2]])
-    clear = np.array([[3.0], [3.0], [-0.1]])
-    m.observe_geometry(0.0, pos, pairs, clear)
-    m.observe_geometry(0.1, pos, pairs, clear)              # same pair counted once
+    clear = np.array([[3.0], [-0.1]])                      # robots 0 and 2 see an obstacle
+    m.observe_geometry(0.0, pos, pairs, np.array([0, 2]), clear)
+    m.observe_geometry(0.1, pos, pairs, np.array([0, 2]), clear)   # counted once
     s = m.summary("x", 1.0)
     assert s["collisions"] == 2
     assert s["colliding_pairs"] == [(1, 2)] and s["robots_in_obstacles"] == [3]

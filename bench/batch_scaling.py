@@ -1,0 +1,85 @@
+"""Batch simulator cost per robot-step for growing swarms (prints a table).
+
+    .venv/bin/python bench/batch_scaling.py [--sizes 9 100 1000 10000] [--repeats 3]
+
+Each size runs a grid formation (spacing 5 m) moving at 2 m/s through a field of obstacles,
+robots starting scattered around their places, T = 0.02 s, 4 physics substeps, metrics on,
+no trajectory recording. Reported: median wall time per control period, per robot-step, the
+real-time factor (simulated / wall time) and the share spent in the control law. Also the
+paper example end to end (20 s simulated). Medians over repeats: the machine is shared.
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from agent.config import ControlParams, RobotParams
+from agent.formation import Formation, FormationKind, formation_offsets
+from firmware_sim.batch import SimOptions, simulate
+from firmware_sim.world import Obstacles
+from hil.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def swarm(n: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    offsets = formation_offsets(FormationKind.GRID, n, 5.0)
+    form = Formation(offsets, (0.0, 0.0), (2.0, 0.0))
+    poses = np.column_stack([offsets + rng.uniform(-1.0, 1.0, offsets.shape) - [6.0, 0.0],
+                             rng.uniform(-np.pi, np.pi, n)])
+    half = np.abs(offsets).max() + 10.0
+    k = max(2, n // 20)
+    obstacles = Obstacles(rng.uniform([-half + 20, -half], [half + 40, half], (k, 2)),
+                          rng.uniform(0.5, 1.5, k))
+    return poses, form, obstacles
+
+
+def time_run(n: int, steps: int, repeats: int) -> tuple[float, float]:
+    """(median wall seconds per period, median share of time in the law)."""
+    poses, form, obstacles = swarm(n)
+    control = ControlParams()
+    walls, shares = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        res = simulate(np.arange(n), poses, form, obstacles, control, RobotParams(),
+                       SimOptions(duration=steps * control.period, record_every=0),
+                       clock=time.perf_counter)
+        wall = time.perf_counter() - t0
+        walls.append(wall / (steps + 1))
+        shares.append(res.law_seconds / wall)
+    return statistics.median(walls), statistics.median(shares)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[9, 100, 1000, 10000])
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+
+    sc = load_scenario(ROOT / "scenarios" / "paper.toml")
+    paper = []
+    for _ in range(max(args.repeats, 3)):
+        t0 = time.perf_counter()
+        simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
+                 SimOptions(duration=sc.duration, record_every=0))
+        paper.append(time.perf_counter() - t0)
+    print(f"paper example (9 robots, 20 s, T = 0.02 s): median {statistics.median(paper):.3f} s "
+          f"compute (target < 0.5 s)\n")
+
+    period = ControlParams().period
+    print(f"{'robots':>7} {'ms/period':>10} {'us/robot-step':>14} {'x real time':>12} "
+          f"{'law share':>10}")
+    for n in args.sizes:
+        steps = 500 if n <= 1000 else 100
+        wall, share = time_run(n, steps, args.repeats)
+        print(f"{n:>7} {wall * 1e3:>10.3f} {wall / n * 1e6:>14.2f} {period / wall:>12.1f} "
+              f"{share:>10.0%}")
+
+
+if __name__ == "__main__":
+    main()
