@@ -132,3 +132,26 @@ def test_bad_options_are_refused():
     with pytest.raises(ValueError, match="formation has 9 places for 2 robots"):
         simulate(sc.ids[:2], sc.poses[:2], sc.formation, sc.obstacles, sc.control, sc.robot,
                  SimOptions(duration=1.0))
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_cluttered_fields_never_collide(seed):
+    """Obstacle gaps below 2b: best effort for convergence, but no collision ever."""
+    rng = np.random.default_rng(seed)
+    obstacles = []
+    while len(obstacles) < 14:
+        centre, r = rng.uniform([-15, -20], [25, 20]), rng.uniform(1.0, 3.0)
+        gaps = [np.linalg.norm(centre - oc) - r - orr for oc, orr in obstacles]
+        if all(g >= 1.0 for g in gaps):               # narrow passages allowed
+            obstacles.append((centre, r))
+    n = 16
+    poses = np.column_stack([rng.uniform(-60, -40, n), np.linspace(-20, 20, n),
+                             np.zeros(n)])
+    form = Formation(formation_offsets(FormationKind.GRID, n, 5.0), (-40.0, 0.0), (2.0, 0.0))
+    obs = Obstacles(np.array([o[0] for o in obstacles]), np.array([o[1] for o in obstacles]))
+    res = simulate(np.arange(1, n + 1), poses, form, obs, ControlParams(), RobotParams(),
+                   SimOptions(duration=50.0, record_every=0))
+    m = res.metrics.summary("cluttered", 50.0)
+    assert m["collisions"] == 0 and m["min_pair_distance"] > 1.0
+    assert m["min_obstacle_clearance"] > 1.0
+    assert len(m["stuck_robots"]) <= n // 4             # most converge
