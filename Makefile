@@ -14,7 +14,6 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/boundswarm sim scenarios/paper.toml --out runs/paper
-	@echo "Figures: runs/paper/figures/   metrics: runs/paper/metrics.json"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

@@ -50,8 +50,8 @@ def draw_figures(data: RunData, obstacles: Obstacles, a: float, b: float, out: P
     series = [(data.pose[..., 0], "x [m]", "Evolution of the x coordinates"),
               (data.pose[..., 1], "y [m]", "Evolution of the y coordinates"),
               (data.pose[..., 2], "theta [rad]", "Evolution of the heading angles"),
-              (data.u, "u [rad/s]", "Angular speeds"),
-              (data.v, "v [m/s]", "Translational speeds")]
+              (data.u, "u [rad/s]", "Evolution of the angular speeds"),
+              (data.v, "v [m/s]", "Evolution of the linear speeds")]
     for path, (values, ylabel, title) in zip(paths, series):
         _time_plot(path, data.t, values, data.ids, ylabel, title, legend)
 
@@ -64,7 +64,7 @@ def draw_figures(data: RunData, obstacles: Obstacles, a: float, b: float, out: P
     ax.axhline(b, color="orange", lw=1, ls=":", label=f"b = {b:g} m (avoidance)")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("distance [m]")
-    ax.set_title("Minimum distance among agents")
+    ax.set_title("Evolution of the minimum distance among agents")
     ax.set_ylim(bottom=0)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)

@@ -1,0 +1,102 @@
+"""A fixed-period loop on a monotonic clock with absolute deadlines.
+
+Theory of operation: the k-th tick is due at start + k * period. After a tick the loop sleeps
+until the next deadline that is still in the future; if a tick ran past one or more
+deadlines, those ticks are skipped (never caught up in a burst) and counted as overruns.
+The clock and the sleep are injected, so tests run the loop on simulated time.
+
+Statistics: wake-up jitter (actual start minus deadline) and compute time per tick, kept
+in a bounded ring so a long run does not grow memory.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+import numpy as np
+
+
+class Clock(Protocol):
+    def monotonic(self) -> float: ...          # s, for scheduling and timeouts
+    def wall(self) -> float: ...               # s, UNIX time, for stamps and the epoch
+    def sleep_until(self, deadline: float) -> None: ...   # monotonic deadline [s]
+
+
+class SystemClock:
+    """The real clocks: CLOCK_MONOTONIC for scheduling, UNIX time for stamps."""
+
+    def monotonic(self) -> float:
+        return time.monotonic()
+
+    def wall(self) -> float:
+        return time.time()
+
+    def sleep_until(self, deadline: float) -> None:
+        delay = deadline - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+
+
+@dataclass
+class LoopStats:
+    """Timing of the ticks run so far (the last ``window`` ticks for percentiles)."""
+
+    period: float
+    window: int = 20000
+    ticks: int = 0
+    overruns: int = 0            # deadlines missed (ticks skipped)
+    jitter: deque = field(default_factory=deque)     # s, start - deadline
+    compute: deque = field(default_factory=deque)    # s, tick duration
+
+    def record(self, jitter: float, compute: float) -> None:
+        self.ticks += 1
+        for ring, value in ((self.jitter, jitter), (self.compute, compute)):
+            ring.append(value)
+            if len(ring) > self.window:
+                ring.popleft()
+
+    def summary(self) -> dict:
+        """Percentiles in milliseconds, counts as integers."""
+        def pct(ring: deque) -> dict:
+            if not ring:
+                return {"p50_ms": None, "p99_ms": None, "max_ms": None}
+            a = np.asarray(ring) * 1e3
+            return {"p50_ms": float(np.percentile(a, 50)), "p99_ms": float(np.percentile(a, 99)),
+                    "max_ms": float(a.max())}
+        return {"period_s": self.period, "ticks": self.ticks, "overruns": self.overruns,
+                "jitter": pct(self.jitter), "compute": pct(self.compute)}
+
+
+class FixedRateLoop:
+    """Calls ``tick(k, deadline)`` every ``period`` seconds until ``stop()``."""
+
+    def __init__(self, period: float, clock: Clock):
+        if not (period > 0 and math.isfinite(period)):
+            raise ValueError(f"loop period must be a positive number of seconds, got {period!r}")
+        self.period = period
+        self.clock = clock
+        self.stats = LoopStats(period)
+        self._running = False
+
+    def stop(self) -> None:
+        """Ask the loop to return after the current tick (safe from a signal handler)."""
+        self._running = False
+
+    def run(self, tick: Callable[[int, float], None], max_ticks: int | None = None) -> None:
+        self._running = True
+        start = self.clock.monotonic()
+        k = 0
+        while self._running and (max_ticks is None or self.stats.ticks < max_ticks):
+            deadline = start + k * self.period
+            self.clock.sleep_until(deadline)
+            woke = self.clock.monotonic()
+            tick(k, deadline)
+            done = self.clock.monotonic()
+            self.stats.record(woke - deadline, done - woke)
+            # next deadline still in the future; deadlines passed meanwhile are skipped
+            next_k = max(k + 1, math.floor((done - start) / self.period) + 1)
+            self.stats.overruns += next_k - (k + 1)
+            k = next_k

@@ -1,0 +1,64 @@
+"""The fixed-rate loop on simulated time."""
+import pytest
+
+from agent.loop import FixedRateLoop
+
+
+class SimClock:
+    """Monotonic time that advances only when slept or when a tick 'computes'."""
+
+    def __init__(self, start=100.0):
+        self.now = start
+
+    def monotonic(self):
+        return self.now
+
+    def wall(self):
+        return 1e9 + self.now
+
+    def sleep_until(self, deadline):
+        self.now = max(self.now, deadline)
+
+
+def test_ticks_on_absolute_deadlines_without_drift():
+    clock = SimClock()
+    loop = FixedRateLoop(0.02, clock)
+    starts = []
+
+    def tick(k, deadline):
+        starts.append((k, clock.now))
+        clock.now += 0.005                     # compute time
+
+    loop.run(tick, max_ticks=500)
+    assert [k for k, _ in starts] == list(range(500))
+    assert starts[-1][1] == pytest.approx(100.0 + 499 * 0.02)    # no accumulated drift
+    s = loop.stats.summary()
+    assert s["overruns"] == 0 and s["ticks"] == 500
+    assert s["compute"]["p50_ms"] == pytest.approx(5.0)
+    assert s["jitter"]["max_ms"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_overrun_skips_missed_ticks_instead_of_catching_up():
+    clock = SimClock()
+    loop = FixedRateLoop(0.02, clock)
+    seen = []
+
+    def tick(k, deadline):
+        seen.append(k)
+        clock.now += 0.065 if k == 3 else 0.001   # tick 3 overruns by 2 periods and more
+
+    loop.run(tick, max_ticks=8)
+    assert seen == [0, 1, 2, 3, 7, 8, 9, 10]
+    assert loop.stats.overruns == 3
+
+
+def test_stop_from_inside_a_tick():
+    clock = SimClock()
+    loop = FixedRateLoop(0.01, clock)
+    loop.run(lambda k, d: loop.stop() if k == 4 else None)
+    assert loop.stats.ticks == 5
+
+
+def test_bad_period_is_refused():
+    with pytest.raises(ValueError, match="period"):
+        FixedRateLoop(0.0, SimClock())

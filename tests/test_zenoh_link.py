@@ -1,0 +1,102 @@
+"""Zenoh link over a router on loopback (scouting off): keys, latest values, presence."""
+import socket
+import time
+
+import pytest
+import zenoh
+
+from transport.payloads import StateFlags, StateMsg
+from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def sessions():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    opened = []
+    try:
+        opened.append(open_session(session_config("router", listen=[endpoint]), "router"))
+        for _ in range(2):
+            opened.append(open_session(session_config("client", connect=[endpoint]), "client"))
+        yield opened[1], opened[2]
+    finally:
+        for s in reversed(opened):
+            s.close()
+
+
+def wait_for(cond, timeout=5.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def state(rid, seq, stamp):
+    return StateMsg(rid, seq, stamp, 1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, StateFlags(0))
+
+
+def test_keys():
+    k = Keys("demo")
+    assert k.state(3) == "boundswarm/demo/robot/3/state" and k.robot(3) == "boundswarm/demo/robot/3"
+    assert k.mission == "boundswarm/demo/mission" and Keys.robot_id_of(k.truth(12)) == 12
+    with pytest.raises(ValueError, match="swarm name"):
+        Keys("a/b")
+
+
+def test_config_refuses_unknown_mode():
+    with pytest.raises(ValueError, match="zenoh mode"):
+        session_config("server")
+
+
+def test_latest_value_cache_drops_malformed_and_own(sessions):
+    a, b = sessions
+    keys = Keys("t")
+    cache = Latest(b, keys.state("*"), StateMsg.decode, time.time, ignore=[9])
+    try:
+        pub = a.declare_publisher(keys.state(1))
+        time.sleep(0.2)
+        snap_before = cache.snapshot()
+        for seq in range(5):
+            pub.put(state(1, seq, 100.0 + seq).encode())
+        a.put(keys.state(2), b"garbage")
+        a.put(keys.state(9), state(9, 0, 1.0).encode())          # own id: ignored
+        a.put(keys.state(1), state(1, 99, 50.0).encode())        # older stamp: out of order
+        assert wait_for(lambda: cache.counters()["received"] >= 8)
+        snap = cache.snapshot()
+        assert list(snap) == [1] and snap[1].msg.seq == 4
+        assert dict(snap_before) == {}                            # snapshots never change
+        c = cache.counters()
+        assert c["dropped"] == {"size": 1, "out_of_order": 1} and c["accepted"] == 5
+        with pytest.raises(TypeError):
+            snap[5] = None                                        # read-only
+    finally:
+        cache.close()
+
+
+def test_presence_join_and_leave(sessions):
+    a, b = sessions
+    keys = Keys("t")
+    presence = Presence(b, keys)
+    try:
+        token = a.liveliness().declare_token(keys.robot(4))
+        assert wait_for(lambda: presence.alive() == {4})
+        token.undeclare()
+        assert wait_for(lambda: presence.alive() == frozenset())
+        assert presence.left[4] == 1
+    finally:
+        presence.close()
+
+
+def test_unreachable_router_is_a_clear_error():
+    conf = session_config("client", connect=[f"tcp/127.0.0.1:{free_port()}"])
+    conf.insert_json5("connect/timeout_ms", "200")
+    conf.insert_json5("connect/exit_on_failure", "true")
+    with pytest.raises(ConnectionError, match="cannot open the zenoh session for agent 3"):
+        open_session(conf, "agent 3")

@@ -1,0 +1,231 @@
+"""Zenoh payload layouts: the one place where they are defined.
+
+Every payload is little-endian and starts with the same 16-byte header::
+
+    offset size type  field
+    0      1    u8    version      (VERSION = 1)
+    1      1    u8    kind         (PayloadKind)
+    2      2    u16   robot_id     (0 for the mission)
+    4      4    u32   seq          (per publisher, wraps)
+    8      8    f64   stamp        [s] UNIX time (hosts keep their clocks in sync, e.g. chrony)
+
+followed by the body of its kind:
+
+* STATE (key ``.../robot/<id>/state``, 36-byte body, 52 bytes in all):
+  x, y, theta, v, u, x_d, y_d as f32 [m, m, rad, m/s, rad/s, m, m], mode u8 (agent.law.Mode),
+  flags u8 (StateFlags), 6 reserved zero bytes.
+* OBSTACLES (``.../robot/<id>/obstacles``): count u16, then count x (cx, cy, r) f32 [m].
+* TRUTH (``.../robot/<id>/truth``, SITL only): x, y, theta, v, u as f64.
+* MISSION (``.../mission``): epoch f64 [s, UNIX time], center0 2 x f64 [m], velocity 2 x f32
+  [m/s], omega f32 [rad/s], count u16, then count x (robot_id u16, offset_x f32, offset_y f32).
+
+A payload of the wrong size, version or kind, or with a non-finite number, raises
+:class:`PayloadError` (with a short ``reason`` for counters) and must be dropped.
+"""
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+VERSION = 1
+
+HEADER = struct.Struct("<BBHId")
+STATE_BODY = struct.Struct("<7fBB6x")
+TRUTH_BODY = struct.Struct("<5d")
+COUNT = struct.Struct("<H")
+CIRCLE = struct.Struct("<3f")
+MISSION_BODY = struct.Struct("<d2d2ffH")
+MEMBER = struct.Struct("<Hff")
+
+
+class PayloadKind(enum.IntEnum):
+    STATE = 1
+    OBSTACLES = 2
+    TRUTH = 3
+    MISSION = 4
+
+
+class StateFlags(enum.IntFlag):
+    ARMED = 1
+    HOLD = 2          # commanded to stand still
+    FAILSAFE = 4      # a timeout or fault put the agent in its safe state
+
+
+class PayloadError(ValueError):
+    """A payload that must be dropped; ``reason`` is one of size, version, kind, nonfinite."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class Header:
+    kind: PayloadKind
+    robot_id: int
+    seq: int
+    stamp: float   # s, UNIX time
+
+
+def _header(data: bytes, kind: PayloadKind) -> Header:
+    if len(data) < HEADER.size:
+        raise PayloadError("size", f"{len(data)} bytes, shorter than the header")
+    version, got, robot_id, seq, stamp = HEADER.unpack_from(data)
+    if version != VERSION:
+        raise PayloadError("version", f"version {version}, expected {VERSION}")
+    if got != kind:
+        raise PayloadError("kind", f"kind {got}, expected {int(kind)} ({kind.name})")
+    if not math.isfinite(stamp):
+        raise PayloadError("nonfinite", "stamp")
+    return Header(kind, robot_id, seq, stamp)
+
+
+def _finite(values, what: str) -> None:
+    if not all(math.isfinite(v) for v in values):
+        raise PayloadError("nonfinite", what)
+
+
+def _exact(data: bytes, size: int) -> None:
+    if len(data) != size:
+        raise PayloadError("size", f"{len(data)} bytes, expected {size}")
+
+
+@dataclass(frozen=True)
+class StateMsg:
+    """An agent's own state, published every period for its neighbours."""
+
+    robot_id: int
+    seq: int
+    stamp: float
+    x: float
+    y: float
+    theta: float
+    v: float
+    u: float
+    x_d: float
+    y_d: float
+    mode: int
+    flags: StateFlags
+
+    SIZE = HEADER.size + STATE_BODY.size
+
+    def encode(self) -> bytes:
+        return (HEADER.pack(VERSION, PayloadKind.STATE, self.robot_id, self.seq & 0xFFFFFFFF,
+                            self.stamp)
+                + STATE_BODY.pack(self.x, self.y, self.theta, self.v, self.u, self.x_d,
+                                  self.y_d, self.mode, int(self.flags)))
+
+    @classmethod
+    def decode(cls, data: bytes) -> "StateMsg":
+        h = _header(data, PayloadKind.STATE)
+        _exact(data, cls.SIZE)
+        x, y, th, v, u, xd, yd, mode, flags = STATE_BODY.unpack_from(data, HEADER.size)
+        _finite((x, y, th, v, u, xd, yd), "state")
+        return cls(h.robot_id, h.seq, h.stamp, x, y, th, v, u, xd, yd, mode,
+                   StateFlags(flags & 0x7))
+
+    def as_array(self) -> np.ndarray:
+        """(x, y, theta, v, u), the form agent.neighbours.extrapolate takes."""
+        return np.array([self.x, self.y, self.theta, self.v, self.u])
+
+
+@dataclass(frozen=True)
+class ObstaclesMsg:
+    """Circular obstacles detected around one robot."""
+
+    robot_id: int
+    seq: int
+    stamp: float
+    centers: np.ndarray    # (K, 2) m
+    radii: np.ndarray      # (K,) m
+
+    def encode(self) -> bytes:
+        k = len(self.radii)
+        body = np.column_stack([self.centers, self.radii]).astype("<f4").tobytes() if k else b""
+        return (HEADER.pack(VERSION, PayloadKind.OBSTACLES, self.robot_id,
+                            self.seq & 0xFFFFFFFF, self.stamp) + COUNT.pack(k) + body)
+
+    @classmethod
+    def decode(cls, data: bytes) -> "ObstaclesMsg":
+        h = _header(data, PayloadKind.OBSTACLES)
+        if len(data) < HEADER.size + COUNT.size:
+            raise PayloadError("size", f"{len(data)} bytes, no obstacle count")
+        (k,) = COUNT.unpack_from(data, HEADER.size)
+        _exact(data, HEADER.size + COUNT.size + k * CIRCLE.size)
+        arr = np.frombuffer(data, dtype="<f4", offset=HEADER.size + COUNT.size).reshape(k, 3)
+        arr = arr.astype(float)
+        if not np.isfinite(arr).all():
+            raise PayloadError("nonfinite", "obstacles")
+        if (arr[:, 2] <= 0).any():
+            raise PayloadError("nonfinite", "obstacle radius <= 0")
+        return cls(h.robot_id, h.seq, h.stamp, arr[:, :2].copy(), arr[:, 2].copy())
+
+
+@dataclass(frozen=True)
+class TruthMsg:
+    """Ground-truth pose and velocities of one robot (SITL world only)."""
+
+    robot_id: int
+    seq: int
+    stamp: float
+    x: float
+    y: float
+    theta: float
+    v: float
+    u: float
+
+    SIZE = HEADER.size + TRUTH_BODY.size
+
+    def encode(self) -> bytes:
+        return (HEADER.pack(VERSION, PayloadKind.TRUTH, self.robot_id, self.seq & 0xFFFFFFFF,
+                            self.stamp)
+                + TRUTH_BODY.pack(self.x, self.y, self.theta, self.v, self.u))
+
+    @classmethod
+    def decode(cls, data: bytes) -> "TruthMsg":
+        h = _header(data, PayloadKind.TRUTH)
+        _exact(data, cls.SIZE)
+        values = TRUTH_BODY.unpack_from(data, HEADER.size)
+        _finite(values, "truth")
+        return cls(h.robot_id, h.seq, h.stamp, *values)
+
+
+@dataclass(frozen=True)
+class MissionMsg:
+    """The formation and its start time (the shared epoch) for the whole swarm."""
+
+    seq: int
+    stamp: float
+    epoch: float                      # s, UNIX time at which t = 0
+    center0: tuple[float, float]      # m
+    velocity: tuple[float, float]     # m/s
+    omega: float                      # rad/s
+    ids: np.ndarray                   # (N,) robot ids, formation order
+    offsets: np.ndarray               # (N, 2) m
+
+    def encode(self) -> bytes:
+        n = len(self.ids)
+        members = b"".join(MEMBER.pack(int(i), float(o[0]), float(o[1]))
+                           for i, o in zip(self.ids, self.offsets))
+        return (HEADER.pack(VERSION, PayloadKind.MISSION, 0, self.seq & 0xFFFFFFFF, self.stamp)
+                + MISSION_BODY.pack(self.epoch, *self.center0, *self.velocity, self.omega, n)
+                + members)
+
+    @classmethod
+    def decode(cls, data: bytes) -> "MissionMsg":
+        h = _header(data, PayloadKind.MISSION)
+        if len(data) < HEADER.size + MISSION_BODY.size:
+            raise PayloadError("size", f"{len(data)} bytes, shorter than a mission")
+        epoch, cx, cy, vx, vy, omega, n = MISSION_BODY.unpack_from(data, HEADER.size)
+        _exact(data, HEADER.size + MISSION_BODY.size + n * MEMBER.size)
+        _finite((epoch, cx, cy, vx, vy, omega), "mission")
+        members = [MEMBER.unpack_from(data, HEADER.size + MISSION_BODY.size + k * MEMBER.size)
+                   for k in range(n)]
+        ids = np.array([m[0] for m in members], dtype=int)
+        offsets = np.array([m[1:] for m in members], dtype=float).reshape(n, 2)
+        _finite(offsets.ravel(), "mission offsets")
+        return cls(h.seq, h.stamp, epoch, (cx, cy), (vx, vy), omega, ids, offsets)

@@ -1,0 +1,192 @@
+"""Zenoh: sessions that stay on the configured endpoints, the key space, latest-value caches.
+
+Key space (prefix ``boundswarm/<swarm>``)::
+
+    robot/<id>/state       agent state every period (transport.payloads.StateMsg)
+    robot/<id>             liveliness token while the agent runs
+    robot/<id>/obstacles   obstacle detections for that robot (ObstaclesMsg)
+    robot/<id>/truth       ground truth pose, SITL only (TruthMsg)
+    mission                formation and epoch (MissionMsg)
+
+Receiving never blocks the control loop: subscriber callbacks (zenoh's threads) decode the
+payload and swap in a new dictionary; the loop reads :meth:`Latest.snapshot`, a mapping that
+is never mutated after it is published. Malformed payloads are dropped and counted.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from collections import Counter
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Callable, Generic, Iterable, Mapping, TypeVar
+
+import zenoh
+
+from transport.payloads import PayloadError
+
+log = logging.getLogger(__name__)
+
+M = TypeVar("M")
+
+
+def session_config(mode: str, listen: Iterable[str] = (), connect: Iterable[str] = (),
+                   extra: Mapping[str, object] | None = None) -> zenoh.Config:
+    """A Zenoh config with multicast scouting off and only the given endpoints.
+
+    ``mode`` is ``router``, ``peer`` or ``client``; endpoints are locators such as
+    ``tcp/127.0.0.1:7447``. ``extra`` inserts further JSON5 keys (e.g. TLS settings).
+    """
+    if mode not in ("router", "peer", "client"):
+        raise ValueError(f"zenoh mode must be router, peer or client, got {mode!r}")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    for key, value in (extra or {}).items():
+        conf.insert_json5(key, json.dumps(value))
+    return conf
+
+
+def open_session(conf: zenoh.Config, what: str) -> zenoh.Session:
+    """Open a session, turning zenoh's error into one that says what could not be opened."""
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as exc:
+        raise ConnectionError(f"cannot open the zenoh session for {what}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Keys:
+    """The key expressions of one swarm."""
+
+    swarm: str
+
+    def __post_init__(self) -> None:
+        if not self.swarm or any(c in self.swarm for c in "/*$?#"):
+            raise ValueError(f"swarm name must be non-empty without / * $ ? #, "
+                             f"got {self.swarm!r}")
+
+    @property
+    def prefix(self) -> str:
+        return f"boundswarm/{self.swarm}"
+
+    def robot(self, robot_id: int) -> str:
+        return f"{self.prefix}/robot/{robot_id}"
+
+    def state(self, robot_id: int | str) -> str:
+        return f"{self.prefix}/robot/{robot_id}/state"
+
+    def obstacles(self, robot_id: int | str) -> str:
+        return f"{self.prefix}/robot/{robot_id}/obstacles"
+
+    def truth(self, robot_id: int | str) -> str:
+        return f"{self.prefix}/robot/{robot_id}/truth"
+
+    @property
+    def mission(self) -> str:
+        return f"{self.prefix}/mission"
+
+    @property
+    def all_robots(self) -> str:
+        return f"{self.prefix}/robot/*"
+
+    @staticmethod
+    def robot_id_of(key: str) -> int | None:
+        """The robot id in ``.../robot/<id>[/...]``, or None."""
+        parts = str(key).split("/")
+        try:
+            return int(parts[parts.index("robot") + 1])
+        except (ValueError, IndexError):
+            return None
+
+
+@dataclass(frozen=True)
+class Received(Generic[M]):
+    msg: M
+    received: float     # s, UNIX time when it arrived
+
+
+class Latest(Generic[M]):
+    """Latest valid message per robot id on a key expression, with counters.
+
+    ``decode(bytes) -> msg`` raises PayloadError for a payload to drop; ``ignore`` lists
+    robot ids not to keep (the agent's own state). Counters: ``received``, ``accepted``,
+    ``dropped`` by reason (PayloadError reasons, and ``out_of_order``: older than the held one).
+    """
+
+    def __init__(self, session: zenoh.Session, key: str, decode: Callable[[bytes], M],
+                 clock: Callable[[], float], ignore: Iterable[int] = ()):
+        self._decode, self._clock, self._ignore = decode, clock, frozenset(ignore)
+        self._lock = threading.Lock()
+        self._latest: Mapping[int, Received[M]] = MappingProxyType({})
+        self.received = 0
+        self.accepted = 0
+        self.dropped: Counter = Counter()
+        self._sub = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        now = self._clock()
+        data = sample.payload.to_bytes()
+        with self._lock:
+            self.received += 1
+            try:
+                msg = self._decode(data)
+            except PayloadError as exc:
+                self.dropped[exc.reason] += 1
+                log.debug("dropped payload on %s: %s", sample.key_expr, exc)
+                return
+            rid = getattr(msg, "robot_id", 0)
+            if rid in self._ignore:
+                return
+            held = self._latest.get(rid)
+            if held is not None and getattr(msg, "stamp", 0.0) < getattr(held.msg, "stamp", 0.0):
+                self.dropped["out_of_order"] += 1
+                return
+            self.accepted += 1
+            latest = dict(self._latest)
+            latest[rid] = Received(msg, now)
+            self._latest = MappingProxyType(latest)
+
+    def snapshot(self) -> Mapping[int, Received[M]]:
+        """The latest message of each robot id; never mutated afterwards."""
+        return self._latest
+
+    def counters(self) -> dict:
+        with self._lock:
+            return {"received": self.received, "accepted": self.accepted,
+                    "dropped": dict(self.dropped)}
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class Presence:
+    """Which robots of the swarm hold a liveliness token (join and leave)."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys):
+        self._lock = threading.Lock()
+        self._alive: frozenset[int] = frozenset()
+        self.left: Counter = Counter()
+        self._sub = session.liveliness().declare_subscriber(keys.all_robots, self._on_sample,
+                                                            history=True)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        rid = Keys.robot_id_of(str(sample.key_expr))
+        if rid is None:
+            return
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._alive = self._alive | {rid}
+            else:
+                self._alive = self._alive - {rid}
+                self.left[rid] += 1
+                log.warning("robot %d left the swarm (liveliness token dropped)", rid)
+
+    def alive(self) -> frozenset[int]:
+        return self._alive
+
+    def close(self) -> None:
+        self._sub.undeclare()
