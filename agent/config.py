@@ -12,8 +12,15 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping, TypeVar
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
 
 log = logging.getLogger(__name__)
 
@@ -135,6 +142,100 @@ def check_braking_margin(control: ControlParams, robot: RobotParams, data_age: f
 
 
 T = TypeVar("T")
+
+
+def load_toml(path: Path, what: str, error: type[ValueError] = ConfigError) -> dict:
+    """Read a TOML file; unreadable or invalid files raise ``error`` naming the path."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise error(f"{path}: cannot read {what}: {exc.strerror}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: not valid TOML: {exc}") from None
+
+
+class TableReader:
+    """Typed access to TOML values with messages that name the file and the field."""
+
+    def __init__(self, where: str, error: type[ValueError] = ConfigError):
+        self.where, self.error = where, error
+
+    def fail(self, field: str, msg: str) -> ValueError:
+        return self.error(f"{self.where}: {field}: {msg}")
+
+    def string(self, table: dict, key: str, field: str, default: str | None = None) -> str:
+        value = table.get(key, default)
+        if not isinstance(value, str) or not value:
+            raise self.fail(field, "missing" if value is None
+                            else f"expected a non-empty string, got {value!r}")
+        return value
+
+    def integer(self, table: dict, key: str, field: str, default: int | None = None,
+                lo: int | None = None, hi: int | None = None) -> int:
+        value = table.get(key, default)
+        if value is None:
+            raise self.fail(field, "missing")
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(field, f"expected an integer, got {value!r}")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self.fail(field, f"must be in [{lo}, {hi}], got {value}")
+        return value
+
+    def strings(self, table: dict, key: str, field: str, default: tuple = ()) -> tuple:
+        value = table.get(key, list(default))
+        if not isinstance(value, list) or not all(isinstance(x, str) and x for x in value):
+            raise self.fail(field, f"expected a list of strings, got {value!r}")
+        return tuple(value)
+
+    def number(self, table: dict, key: str, field: str, default: float | None = None,
+               positive: bool = False) -> float:
+        if key not in table:
+            if default is None:
+                raise self.fail(field, "missing")
+            return default
+        value = table[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            raise self.fail(field, f"expected a finite number, got {value!r}")
+        if positive and value <= 0:
+            raise self.fail(field, f"must be > 0, got {value!r}")
+        return float(value)
+
+    def vector(self, table: dict, key: str, field: str, size: int,
+               default: tuple | None = None) -> tuple[float, ...]:
+        if key not in table:
+            if default is None:
+                raise self.fail(field, "missing")
+            return default
+        value = table[key]
+        if not isinstance(value, list) or len(value) != size or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                for x in value):
+            raise self.fail(field, f"expected a list of {size} finite numbers, got {value!r}")
+        return tuple(float(x) for x in value)
+
+    def table(self, doc: dict, key: str) -> dict:
+        value = doc.get(key, {})
+        if not isinstance(value, dict):
+            raise self.fail(f"[{key}]", f"expected a table, got {value!r}")
+        return value
+
+    def array_of_tables(self, doc: dict, key: str, required: bool) -> list[dict]:
+        value = doc.get(key, [])
+        if not isinstance(value, list) or not all(isinstance(x, dict) for x in value):
+            raise self.fail(f"[[{key}]]", "expected an array of tables")
+        if required and not value:
+            raise self.fail(f"[[{key}]]", "missing: at least one entry is required")
+        return value
+
+    def only(self, table: dict, allowed: set[str], field: str) -> None:
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise self.fail(field, f"unknown field(s) {', '.join(unknown)}; "
+                                   f"allowed: {', '.join(sorted(allowed))}")
+
 
 
 def _check_bounds(obj: Any) -> None:

@@ -15,24 +15,17 @@ Every problem is reported as :class:`ScenarioError` naming the file and the fiel
 """
 from __future__ import annotations
 
-import math
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agent.config import ConfigError, ControlParams, RobotParams, from_table
+from agent.config import (ConfigError, ControlParams, RobotParams, TableReader, from_table,
+                          load_toml)
 from agent.formation import Formation, FormationKind, formation_offsets
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - exercised on Python 3.10 only
-    import tomli as tomllib
-
 
 class ScenarioError(ValueError):
     """A scenario file is unreadable, or a field in it is missing or wrong."""
@@ -57,80 +50,16 @@ class Scenario:
 TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles"}
 
 
-class _Reader:
-    """Typed access to TOML values with messages that name the file and the field."""
-
-    def __init__(self, where: str):
-        self.where = where
-
-    def fail(self, field: str, msg: str) -> ScenarioError:
-        return ScenarioError(f"{self.where}: {field}: {msg}")
-
-    def number(self, table: dict, key: str, field: str, default: float | None = None,
-               positive: bool = False) -> float:
-        if key not in table:
-            if default is None:
-                raise self.fail(field, "missing")
-            return default
-        value = table[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value):
-            raise self.fail(field, f"expected a finite number, got {value!r}")
-        if positive and value <= 0:
-            raise self.fail(field, f"must be > 0, got {value!r}")
-        return float(value)
-
-    def vector(self, table: dict, key: str, field: str, size: int,
-               default: tuple | None = None) -> tuple[float, ...]:
-        if key not in table:
-            if default is None:
-                raise self.fail(field, "missing")
-            return default
-        value = table[key]
-        if not isinstance(value, list) or len(value) != size or not all(
-                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                for x in value):
-            raise self.fail(field, f"expected a list of {size} finite numbers, got {value!r}")
-        return tuple(float(x) for x in value)
-
-    def table(self, doc: dict, key: str) -> dict:
-        value = doc.get(key, {})
-        if not isinstance(value, dict):
-            raise self.fail(f"[{key}]", f"expected a table, got {value!r}")
-        return value
-
-    def array_of_tables(self, doc: dict, key: str, required: bool) -> list[dict]:
-        value = doc.get(key, [])
-        if not isinstance(value, list) or not all(isinstance(x, dict) for x in value):
-            raise self.fail(f"[[{key}]]", "expected an array of tables")
-        if required and not value:
-            raise self.fail(f"[[{key}]]", "missing: at least one entry is required")
-        return value
-
-    def only(self, table: dict, allowed: set[str], field: str) -> None:
-        unknown = sorted(set(table) - allowed)
-        if unknown:
-            raise self.fail(field, f"unknown field(s) {', '.join(unknown)}; "
-                                   f"allowed: {', '.join(sorted(allowed))}")
-
-
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ScenarioError(f"{path}: cannot read scenario file: {exc.strerror}") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
-    return parse_scenario(doc, str(path), source=path)
+    return parse_scenario(load_toml(path, "scenario file", ScenarioError), str(path),
+                          source=path)
 
 
 def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) -> Scenario:
     """Validate a scenario already parsed from TOML; ``where`` names it in messages."""
-    rd = _Reader(where)
+    rd = TableReader(where, ScenarioError)
     rd.only(doc, TOP_KEYS, "top level")
     name = doc.get("name")
     if not isinstance(name, str) or not name:
@@ -189,7 +118,7 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
                     sensing_range=sensing, substeps=substeps, plant=plant, source=source)
 
 
-def _formation(rd: _Reader, table: dict, n: int, control: ControlParams) -> Formation:
+def _formation(rd: TableReader, table: dict, n: int, control: ControlParams) -> Formation:
     rd.only(table, {"kind", "spacing", "center0", "velocity", "omega", "offsets"},
             "[formation]")
     try:

@@ -3,7 +3,6 @@ import socket
 import time
 
 import pytest
-import zenoh
 
 from transport.payloads import StateFlags, StateMsg
 from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
