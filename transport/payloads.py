@@ -28,6 +28,7 @@ import enum
 import math
 import struct
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -53,6 +54,17 @@ class StateFlags(enum.IntFlag):
     ARMED = 1
     HOLD = 2          # commanded to stand still
     FAILSAFE = 4      # a timeout or fault put the agent in its safe state
+
+
+M = TypeVar("M")
+
+
+@dataclass(frozen=True)
+class Received(Generic[M]):
+    """A decoded message and when it arrived (UNIX time [s], receiver's clock)."""
+
+    msg: M
+    received: float
 
 
 class PayloadError(ValueError):

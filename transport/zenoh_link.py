@@ -24,7 +24,7 @@ from typing import Callable, Generic, Iterable, Mapping, TypeVar
 
 import zenoh
 
-from transport.payloads import PayloadError
+from transport.payloads import PayloadError, Received
 
 log = logging.getLogger(__name__)
 
@@ -101,12 +101,6 @@ class Keys:
             return int(parts[parts.index("robot") + 1])
         except (ValueError, IndexError):
             return None
-
-
-@dataclass(frozen=True)
-class Received(Generic[M]):
-    msg: M
-    received: float     # s, UNIX time when it arrived
 
 
 class Latest(Generic[M]):

@@ -1,0 +1,243 @@
+"""One robot's agent: read -> update -> write, once per period.
+
+Theory of operation. Every tick the agent
+
+1. reads: drains the wheel drivers' feedback (odometry from the encoder positions), takes
+   an immutable snapshot of its neighbours' states, its obstacle detections and the mission;
+2. updates: decides its mode and runs the pure law for itself (N = 1) with its neighbours
+   extrapolated to now (stale ones kept as static obstacles at their last position);
+3. writes: the wheel velocities (curvature-preserving saturation) and its own state.
+
+Modes: DISARMED (drivers IDLE, nothing commanded), HOLD (zero velocity, watchdog fed) and
+FORMATION (the law). Bounds in layers, nearest the actuator last: law (|u| clip) -> wheel
+saturation -> non-finite guard -> stale feedback or driver error means failsafe HOLD ->
+disarmed means no command at all. A failsafe is sticky: it takes a new FORMATION request
+(ground station) to leave it.
+"""
+from __future__ import annotations
+
+import enum
+import logging
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.formation import Formation
+from agent.kinematics import TWO_PI, body_velocity, wheel_commands
+from agent.law import LawInput, LawMemory, Mode, control_step
+from agent.loop import Clock
+from agent.neighbours import extrapolate
+from agent.odometry import Odometry
+from agent.ports import MotorPort, SwarmPort, WheelFeedback
+from agent.settings import AgentSettings
+from transport.payloads import MissionMsg, StateFlags, StateMsg
+
+log = logging.getLogger(__name__)
+
+
+class AgentMode(enum.Enum):
+    DISARMED = "DISARMED"
+    HOLD = "HOLD"
+    FORMATION = "FORMATION"
+
+
+@dataclass
+class AgentCounters:
+    ticks: int = 0
+    failsafes: int = 0
+    nonfinite_commands: int = 0
+    neighbour_age: deque = field(default_factory=lambda: deque(maxlen=20000))  # s
+
+    def summary(self) -> dict:
+        ages = np.asarray(self.neighbour_age) * 1e3
+        return {"ticks": self.ticks, "failsafes": self.failsafes,
+                "nonfinite_commands": self.nonfinite_commands,
+                "neighbour_age_ms": {
+                    "p50": float(np.percentile(ages, 50)) if ages.size else None,
+                    "p99": float(np.percentile(ages, 99)) if ages.size else None,
+                    "count": int(ages.size)}}
+
+
+class Agent:
+    """The agent of robot ``settings.robot_id`` over its injected ports."""
+
+    def __init__(self, settings: AgentSettings, motor: MotorPort, swarm: SwarmPort,
+                 clock: Clock):
+        self.s = settings
+        self.motor, self.swarm, self.clock = motor, swarm, clock
+        self.mode = AgentMode.DISARMED
+        self.failsafe: str | None = None
+        self.odometry = Odometry(settings.robot.wheel_radius, settings.robot.wheel_base,
+                                 np.array(settings.initial_pose, dtype=float))
+        self.memory = LawMemory.initial(1)
+        self.counters = AgentCounters()
+        self.last_feedback: WheelFeedback | None = None
+        self.command = (0.0, 0.0)          # (v [m/s], u [rad/s]) after saturation
+        self.law_mode = Mode.TRACK
+        self.reference = np.array(settings.initial_pose[:2], dtype=float)
+        self._seq = 0
+        self._last_law = None              # monotonic time of the last law step
+        self._mission_key: tuple | None = None
+        self._formation: Formation | None = None
+
+    # --- commands (from the process, a ground station or autostart) ---------------------
+    def arm(self) -> None:
+        self.motor.arm()
+        self.failsafe = None
+        if self.mode is AgentMode.DISARMED:
+            self.mode = AgentMode.HOLD
+        log.info("robot %d armed", self.s.robot_id)
+
+    def disarm(self) -> None:
+        self.motor.disarm()
+        self.mode = AgentMode.DISARMED
+        log.info("robot %d disarmed", self.s.robot_id)
+
+    def set_mode(self, mode: AgentMode) -> str | None:
+        """Switch HOLD <-> FORMATION; returns the reason when refused."""
+        if mode is AgentMode.DISARMED:
+            return "use disarm to disarm"
+        if self.mode is AgentMode.DISARMED:
+            return "not armed"
+        self.mode = mode
+        if mode is AgentMode.FORMATION:
+            self.failsafe = None
+            self._last_law = None
+        return None
+
+    # --- the loop body ----------------------------------------------------------------------
+    def tick(self, k: int = 0, deadline: float = 0.0) -> None:
+        now_m, now_w = self.clock.monotonic(), self.clock.wall()
+        self.counters.ticks += 1
+        # read
+        fb = self.motor.feedback()
+        if fb is not None:
+            self.odometry.update(*fb.pos_rev)
+        self.last_feedback = fb
+        pose = self.odometry.pose.copy()
+        mission = self.swarm.mission()
+
+        # update
+        v = u = 0.0
+        self.law_mode = Mode.TRACK
+        if self.mode is not AgentMode.DISARMED:
+            self._check_feedback(fb)
+            if self.mode is AgentMode.FORMATION and self.failsafe is None:
+                v, u = self._formation_step(pose, mission, now_m, now_w)
+        else:
+            self._last_law = None
+
+        # write
+        if self.mode is not AgentMode.DISARMED:
+            r = self.s.robot
+            right, left = wheel_commands(np.array([v]), np.array([u]), r.wheel_radius,
+                                         r.wheel_base, r.wheel_speed_limit)
+            right, left = float(right[0]), float(left[0])
+            if not (math.isfinite(right) and math.isfinite(left)):
+                self.counters.nonfinite_commands += 1
+                right = left = 0.0
+            self.motor.command(right, left)
+            v_sat, u_sat = body_velocity(TWO_PI * right, TWO_PI * left, r.wheel_radius,
+                                         r.wheel_base)
+            self.command = (float(v_sat), float(u_sat))
+        else:
+            self.command = (0.0, 0.0)
+        self._publish(pose, now_w)
+
+    def _check_feedback(self, fb: WheelFeedback | None) -> None:
+        reason = None
+        if fb is None or fb.age > self.s.feedback_timeout:
+            reason = "driver feedback lost"
+        elif fb.errors:
+            reason = "driver error: " + ", ".join(fb.errors)
+        if reason and self.failsafe is None:
+            self.failsafe = reason
+            self.counters.failsafes += 1
+            if self.mode is AgentMode.FORMATION:
+                self.mode = AgentMode.HOLD
+            log.critical("robot %d failsafe: %s; holding", self.s.robot_id, reason)
+
+    def _formation_place(self, mission: MissionMsg) -> Formation | None:
+        key = (mission.seq, mission.stamp)
+        if key != self._mission_key:
+            self._mission_key = key
+            where = np.flatnonzero(mission.ids == self.s.robot_id)
+            if where.size == 0:
+                log.error("robot %d is not in the mission's formation", self.s.robot_id)
+                self._formation = None
+            else:
+                self._formation = Formation(mission.offsets[where[:1]], mission.center0,
+                                            mission.velocity, mission.omega)
+        return self._formation
+
+    def _formation_step(self, pose: np.ndarray, mission: MissionMsg | None, now_m: float,
+                        now_w: float) -> tuple[float, float]:
+        if mission is None or now_w < mission.epoch:
+            self._last_law = None
+            return 0.0, 0.0
+        formation = self._formation_place(mission)
+        if formation is None:
+            return 0.0, 0.0
+        ref, _ = formation.reference(now_w - mission.epoch)
+        self.reference = ref[0]
+        nbr_pos, obs_c, obs_r = self._surroundings(pose, now_w)
+        inp = LawInput(pose=pose[None, :], ref=ref,
+                       nbr_pos=nbr_pos[None], nbr_valid=np.ones((1, len(nbr_pos)), bool),
+                       obs_center=obs_c[None], obs_radius=obs_r[None],
+                       obs_valid=np.ones((1, len(obs_r)), bool))
+        dt = self.s.control.period if self._last_law is None else now_m - self._last_law
+        self._last_law = now_m
+        out = control_step(inp, self.memory, self.s.control, dt=max(dt, 1e-6))
+        self.memory = out.memory
+        self.law_mode = Mode(int(out.mode[0]))
+        return float(out.v[0]), float(out.u[0])
+
+    def _surroundings(self, pose: np.ndarray, now_w: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Neighbours in range (extrapolated to now) and obstacles, stale robots included
+        as static obstacles of radius a/2 at their last position."""
+        snap = self.swarm.neighbours()
+        states = [r.msg for rid, r in snap.items() if rid != self.s.robot_id]
+        if states:
+            arr = np.array([m.as_array() for m in states])
+            stamps = np.array([m.stamp for m in states])
+            pos, stale = extrapolate(arr, stamps, now_w, self.s.staleness)
+            near = np.hypot(*(pos - pose[:2]).T) <= self.s.sensing_range
+            for age in (now_w - stamps)[near & ~stale]:
+                self.counters.neighbour_age.append(age)
+            nbr = pos[near & ~stale]
+            stale_pos = pos[near & stale]
+        else:
+            nbr, stale_pos = np.zeros((0, 2)), np.zeros((0, 2))
+        obs = self.swarm.obstacles()
+        centers = obs.centers if obs is not None else np.zeros((0, 2))
+        radii = obs.radii if obs is not None else np.zeros(0)
+        centers = np.vstack([centers, stale_pos])
+        radii = np.concatenate([radii, np.full(len(stale_pos), self.s.control.a / 2)])
+        return nbr.reshape(-1, 2), centers.reshape(-1, 2), radii
+
+    def flags(self) -> StateFlags:
+        f = StateFlags(0)
+        if self.mode is not AgentMode.DISARMED:
+            f |= StateFlags.ARMED
+        if self.mode is AgentMode.HOLD:
+            f |= StateFlags.HOLD
+        if self.failsafe:
+            f |= StateFlags.FAILSAFE
+        return f
+
+    def _publish(self, pose: np.ndarray, now_w: float) -> None:
+        self._seq += 1
+        v, u = self.command
+        self.swarm.publish(StateMsg(self.s.robot_id, self._seq, now_w, float(pose[0]),
+                                    float(pose[1]), float(pose[2]), v, u,
+                                    float(self.reference[0]), float(self.reference[1]),
+                                    int(self.law_mode), self.flags()))
+
+    def shutdown(self) -> None:
+        """Zero velocity, then IDLE."""
+        if self.mode is not AgentMode.DISARMED:
+            self.motor.command(0.0, 0.0)
+            self.disarm()

@@ -1,0 +1,150 @@
+"""The agent process's configuration file (TOML), validated once at start-up.
+
+::
+
+    robot_id = 1                    # 1..255 (also the MAVLink system id)
+    swarm = "paper"                 # Zenoh key prefix boundswarm/<swarm>
+    initial_pose = [x, y, theta]    # m, m, rad: where odometry starts
+    autostart = true                # arm and follow the mission without a ground station
+    [control]                       # agent.config.ControlParams (period = loop period)
+    [robot]                         # agent.config.RobotParams (wheels, driver limits)
+    [can]                           # python-can terms: interface, channel, port (udp_multicast),
+                                    # bitrate; left_node, right_node (ODrive node ids)
+    [zenoh]                         # mode ("client" or "peer"), connect = [...], listen = [...]
+    [timeouts]                      # feedback (0.2 s), staleness (0.5 s)
+    [sensing]                       # range (m, default 2c)
+
+Every problem raises :class:`agent.config.ConfigError` naming the file and the field.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agent.config import ControlParams, RobotParams, TableReader, from_table, load_toml
+
+TOP_KEYS = {"robot_id", "swarm", "initial_pose", "autostart", "control", "robot", "can",
+            "zenoh", "timeouts", "sensing"}
+
+
+@dataclass(frozen=True)
+class CanSettings:
+    """Where the robot's motor drivers are, in python-can's own terms."""
+
+    interface: str = "udp_multicast"
+    channel: str = "ff11::b5:1"
+    port: int | None = None          # udp_multicast only: one port per robot bus
+    bitrate: int = 500_000           # bit/s (socketcan interfaces are set up outside)
+    left_node: int = 0
+    right_node: int = 1
+
+
+@dataclass(frozen=True)
+class ZenohSettings:
+    mode: str = "client"
+    connect: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    listen: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class AgentSettings:
+    robot_id: int
+    swarm: str
+    initial_pose: tuple[float, float, float]
+    control: ControlParams = field(default_factory=ControlParams)
+    robot: RobotParams = field(default_factory=RobotParams)
+    can: CanSettings = field(default_factory=CanSettings)
+    zenoh: ZenohSettings = field(default_factory=ZenohSettings)
+    autostart: bool = False
+    feedback_timeout: float = 0.2     # s without encoder estimates -> zero, HOLD, CRITICAL
+    staleness: float = 0.5            # s, neighbour kept as a static obstacle beyond this
+    sensing_range: float = 8.0        # m
+
+
+def parse_settings(doc: dict, where: str) -> AgentSettings:
+    rd = TableReader(where)
+    rd.only(doc, TOP_KEYS, "top level")
+    control = from_table(ControlParams, rd.table(doc, "control"), f"{where} [control]")
+    robot = from_table(RobotParams, rd.table(doc, "robot"), f"{where} [robot]")
+
+    can_t = rd.table(doc, "can")
+    rd.only(can_t, {"interface", "channel", "port", "bitrate", "left_node", "right_node"},
+            "[can]")
+    port = can_t.get("port")
+    can = CanSettings(
+        interface=rd.string(can_t, "interface", "[can] interface", "udp_multicast"),
+        channel=rd.string(can_t, "channel", "[can] channel", CanSettings.channel),
+        port=None if port is None else rd.integer(can_t, "port", "[can] port", lo=1, hi=65535),
+        bitrate=rd.integer(can_t, "bitrate", "[can] bitrate", 500_000, lo=10_000,
+                           hi=1_000_000),
+        left_node=rd.integer(can_t, "left_node", "[can] left_node", 0, lo=0, hi=63),
+        right_node=rd.integer(can_t, "right_node", "[can] right_node", 1, lo=0, hi=63))
+    if can.left_node == can.right_node:
+        raise rd.fail("[can] right_node", f"must differ from left_node ({can.left_node})")
+
+    z = rd.table(doc, "zenoh")
+    rd.only(z, {"mode", "connect", "listen"}, "[zenoh]")
+    zenoh = ZenohSettings(mode=rd.string(z, "mode", "[zenoh] mode", "client"),
+                          connect=rd.strings(z, "connect", "[zenoh] connect",
+                                             ZenohSettings.connect),
+                          listen=rd.strings(z, "listen", "[zenoh] listen"))
+    if zenoh.mode not in ("client", "peer"):
+        raise rd.fail("[zenoh] mode", f"expected client or peer, got {zenoh.mode!r}")
+    if zenoh.mode == "client" and not zenoh.connect:
+        raise rd.fail("[zenoh] connect", "a client needs at least one router endpoint")
+
+    t = rd.table(doc, "timeouts")
+    rd.only(t, {"feedback", "staleness"}, "[timeouts]")
+    feedback = rd.number(t, "feedback", "[timeouts] feedback", 0.2, positive=True)
+    staleness = rd.number(t, "staleness", "[timeouts] staleness", 0.5, positive=True)
+    if feedback < 2 * control.period:
+        raise rd.fail("[timeouts] feedback", f"must be at least two periods "
+                                             f"({2 * control.period:g} s), got {feedback:g}")
+    s = rd.table(doc, "sensing")
+    rd.only(s, {"range"}, "[sensing]")
+    sensing = rd.number(s, "range", "[sensing] range", 2.0 * control.c, positive=True)
+
+    autostart = doc.get("autostart", False)
+    if not isinstance(autostart, bool):
+        raise rd.fail("autostart", f"expected true or false, got {autostart!r}")
+    swarm = rd.string(doc, "swarm", "swarm")
+    if any(ch in swarm for ch in "/*$?#"):
+        raise rd.fail("swarm", f"must not contain / * $ ? #, got {swarm!r}")
+    return AgentSettings(
+        robot_id=rd.integer(doc, "robot_id", "robot_id", lo=1, hi=255), swarm=swarm,
+        initial_pose=rd.vector(doc, "initial_pose", "initial_pose", 3),
+        control=control, robot=robot, can=can, zenoh=zenoh, autostart=autostart,
+        feedback_timeout=feedback, staleness=staleness, sensing_range=sensing)
+
+
+def load_settings(path: str | Path) -> AgentSettings:
+    path = Path(path)
+    return parse_settings(load_toml(path, "agent config"), str(path))
+
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(value)
+
+
+def settings_to_toml(s: AgentSettings) -> str:
+    """The TOML text of ``s`` (what :func:`load_settings` reads back to an equal object)."""
+    lines = [f"robot_id = {s.robot_id}", f"swarm = {_toml_value(s.swarm)}",
+             f"initial_pose = {_toml_value(list(s.initial_pose))}",
+             f"autostart = {_toml_value(s.autostart)}"]
+    tables = {"control": dataclasses.asdict(s.control), "robot": dataclasses.asdict(s.robot),
+              "can": {k: v for k, v in dataclasses.asdict(s.can).items() if v is not None},
+              "zenoh": dataclasses.asdict(s.zenoh),
+              "timeouts": {"feedback": s.feedback_timeout, "staleness": s.staleness},
+              "sensing": {"range": s.sensing_range}}
+    for name, table in tables.items():
+        lines.append(f"\n[{name}]")
+        lines += [f"{k} = {_toml_value(v)}" for k, v in table.items()]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,98 @@
+"""In-memory ports for agent tests on simulated time: no bus, no session, no wall clock."""
+from __future__ import annotations
+
+from types import MappingProxyType
+
+import numpy as np
+
+from agent.ports import WheelFeedback
+from transport.payloads import Received
+
+
+class SimClock:
+    def __init__(self, start: float = 1000.0, wall_offset: float = 1.7e9):
+        self.now, self.offset = start, wall_offset
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def wall(self) -> float:
+        return self.offset + self.now
+
+    def sleep_until(self, deadline: float) -> None:
+        self.now = max(self.now, deadline)
+
+
+class MirrorMotor:
+    """Mock hardware: wheels follow the last command exactly while armed (ideal drivers)."""
+
+    def __init__(self, clock: SimClock):
+        self.clock = clock
+        self.armed = False
+        self.vel = np.zeros(2)            # right, left [rev/s]
+        self.pos = np.zeros(2)            # [rev]
+        self.last = clock.monotonic()
+        self.commands = 0
+        self.silent = False               # simulate lost feedback
+        self.errors: tuple[str, ...] = ()
+
+    def advance(self) -> None:
+        now = self.clock.monotonic()
+        self.pos += self.vel * (now - self.last)
+        self.last = now
+
+    def arm(self):
+        self.armed = True
+
+    def disarm(self):
+        self.advance()
+        self.armed = False
+        self.vel[:] = 0.0
+
+    def command(self, right, left):
+        self.advance()
+        self.commands += 1
+        if self.armed:
+            self.vel[:] = (right, left)
+
+    def feedback(self):
+        self.advance()
+        if self.silent:
+            return None
+        return WheelFeedback(tuple(self.pos), tuple(self.vel), 0.0, self.armed, self.errors)
+
+    def clear_errors(self):
+        self.errors = ()
+
+
+class SharedSwarm:
+    """One in-memory 'network' that several agents publish to and read from."""
+
+    def __init__(self, clock: SimClock):
+        self.clock = clock
+        self.states: dict = {}
+        self.mission_msg = None
+        self.obstacle_msgs: dict = {}
+
+    def port(self, robot_id: int) -> "SwarmView":
+        return SwarmView(self, robot_id)
+
+
+class SwarmView:
+    def __init__(self, net: SharedSwarm, robot_id: int):
+        self.net, self.robot_id = net, robot_id
+        self.published = []
+
+    def publish(self, state):
+        self.published.append(state)
+        self.net.states[state.robot_id] = Received(state, self.net.clock.wall())
+
+    def neighbours(self):
+        return MappingProxyType({k: v for k, v in self.net.states.items()
+                                 if k != self.robot_id})
+
+    def obstacles(self):
+        return self.net.obstacle_msgs.get(self.robot_id)
+
+    def mission(self):
+        return self.net.mission_msg

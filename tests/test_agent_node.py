@@ -1,0 +1,144 @@
+"""The agent's read -> update -> write over in-memory ports, on simulated time."""
+import numpy as np
+import pytest
+
+from agent.config import ControlParams
+from agent.law import Mode
+from agent.loop import FixedRateLoop
+from agent.node import Agent, AgentMode
+from agent.settings import AgentSettings
+from fakes import MirrorMotor, SharedSwarm, SimClock
+from transport.payloads import MissionMsg, ObstaclesMsg, StateFlags
+
+
+def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in=0.0):
+    clock = SimClock()
+    net = SharedSwarm(clock)
+    ids = np.arange(1, len(poses) + 1)
+    net.mission_msg = MissionMsg(1, clock.wall(), clock.wall() + epoch_in, center0, velocity,
+                                 0.0, ids, np.asarray(offsets, float))
+    agents = []
+    for rid, pose in zip(ids, poses):
+        s = AgentSettings(robot_id=int(rid), swarm="t", initial_pose=tuple(pose),
+                          autostart=True)
+        agents.append(Agent(s, MirrorMotor(clock), net.port(int(rid)), clock))
+    return clock, net, agents
+
+
+def run(clock, agents, seconds):
+    loop = FixedRateLoop(ControlParams().period, clock)
+    loop.run(lambda k, d: [a.tick(k, d) for a in agents],
+             max_ticks=int(seconds / loop.period))
+    return loop
+
+
+def test_a_single_agent_reaches_its_place():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(6.0, 3.0))
+    agent.arm()
+    assert agent.set_mode(AgentMode.FORMATION) is None
+    run(clock, [agent], 6.0)
+    assert np.hypot(*(agent.odometry.pose[:2] - [6.0, 3.0])) < 0.05
+    last = agent.swarm.published[-1]
+    assert last.flags == StateFlags.ARMED and last.x_d == pytest.approx(6.0)
+
+
+def test_agents_swap_through_each_other_without_collision():
+    clock, net, agents = make_swarm([(-6.0, 0.0, 0.0), (6.0, 0.3, np.pi)],
+                                    [(6.0, 0.0), (-6.0, 0.0)])
+    dmin = np.inf
+    for a in agents:
+        a.arm()
+        a.set_mode(AgentMode.FORMATION)
+    for _ in range(600):
+        for a in agents:
+            a.tick()
+        clock.now += 0.02
+        dmin = min(dmin, np.hypot(*(agents[0].odometry.pose[:2] - agents[1].odometry.pose[:2])))
+    assert dmin > 1.0
+    assert agents[0].odometry.pose[0] > 5.0 and agents[1].odometry.pose[0] < -5.0
+    modes = {m.mode for m in agents[0].swarm.published}
+    assert Mode.AVOID in modes
+
+
+def test_hold_before_the_epoch_and_disarmed_sends_nothing():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(5.0, 0.0),
+                                      epoch_in=1.0)
+    agent.tick()
+    assert agent.motor.commands == 0 and agent.mode is AgentMode.DISARMED
+    agent.arm()
+    agent.set_mode(AgentMode.FORMATION)
+    run(clock, [agent], 0.9)
+    assert agent.motor.commands > 0 and np.allclose(agent.motor.pos, 0.0)   # watchdog fed
+    run(clock, [agent], 0.5)
+    assert agent.motor.pos.sum() > 0                                          # moving now
+
+
+def test_lost_feedback_is_a_sticky_failsafe_hold():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(20.0, 0.0))
+    agent.arm()
+    agent.set_mode(AgentMode.FORMATION)
+    run(clock, [agent], 0.5)
+    agent.motor.silent = True
+    agent.tick()
+    assert agent.mode is AgentMode.HOLD and agent.failsafe == "driver feedback lost"
+    assert agent.motor.vel.tolist() == [0.0, 0.0]
+    assert agent.swarm.published[-1].flags & StateFlags.FAILSAFE
+    agent.motor.silent = False
+    run(clock, [agent], 0.2)
+    assert agent.mode is AgentMode.HOLD                   # stays until asked again
+    agent.set_mode(AgentMode.FORMATION)
+    run(clock, [agent], 0.2)
+    assert agent.failsafe is None and agent.motor.vel.sum() > 0
+
+
+def test_driver_error_triggers_failsafe_with_its_name():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(20.0, 0.0))
+    agent.arm()
+    agent.set_mode(AgentMode.FORMATION)
+    agent.motor.errors = ("WATCHDOG_TIMER_EXPIRED",)
+    agent.tick()
+    assert agent.failsafe == "driver error: WATCHDOG_TIMER_EXPIRED"
+    assert agent.counters.failsafes == 1
+
+
+def test_stale_neighbour_is_avoided_as_a_static_obstacle():
+    clock, net, agents = make_swarm([(0.0, 0.0, 0.0), (4.0, 0.0, 0.0)],
+                                    [(0.0, 0.0), (0.0, 0.0)], center0=(12.0, 0.0))
+    a, b = agents
+    b.tick()                                   # b publishes once, then goes silent
+    clock.now += 1.0                           # older than the 0.5 s staleness
+    a.arm()
+    a.set_mode(AgentMode.FORMATION)
+    nbr, centers, radii = a._surroundings(a.odometry.pose, clock.wall())
+    assert len(nbr) == 0 and centers.tolist() == [[4.0, 0.0]] and radii.tolist() == [0.5]
+    dmin = np.inf
+    for _ in range(400):
+        a.tick()
+        clock.now += 0.02
+        dmin = min(dmin, np.hypot(*(a.odometry.pose[:2] - [4.0, 0.0])))
+    assert dmin > 1.0                          # went around it
+    assert a.odometry.pose[0] > 8.0
+
+
+def test_obstacles_from_the_swarm_port_are_used():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(16.0, 0.0))
+    net.obstacle_msgs[1] = ObstaclesMsg(1, 1, clock.wall(), np.array([[8.0, 0.0]]),
+                                        np.array([2.0]))
+    agent.arm()
+    agent.set_mode(AgentMode.FORMATION)
+    clear = np.inf
+    for _ in range(500):
+        agent.tick()
+        clock.now += 0.02
+        clear = min(clear, np.hypot(*(agent.odometry.pose[:2] - [8.0, 0.0])) - 2.0)
+    assert clear > 1.0 and agent.odometry.pose[0] > 14.0
+    assert Mode.ROTATE in {m.mode for m in agent.swarm.published}
+
+
+def test_mode_requests_are_validated():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)])
+    assert agent.set_mode(AgentMode.FORMATION) == "not armed"
+    agent.arm()
+    assert agent.set_mode(AgentMode.DISARMED) == "use disarm to disarm"
+    agent.shutdown()
+    assert agent.mode is AgentMode.DISARMED and not agent.motor.armed
