@@ -99,3 +99,36 @@ def test_unreachable_router_is_a_clear_error():
     conf.insert_json5("connect/exit_on_failure", "true")
     with pytest.raises(ConnectionError, match="cannot open the zenoh session for agent 3"):
         open_session(conf, "agent 3")
+
+
+def test_swarm_link_between_two_agents_and_a_recording(sessions, tmp_path):
+    import numpy as np
+
+    from hil.recorder import Recorder, read_messages
+    from transport.payloads import MissionMsg, ObstaclesMsg
+    from transport.zenoh_link import SwarmLink
+
+    a, b = sessions
+    keys = Keys("t")
+    rec = Recorder(b, keys, tmp_path / "run.mcap")
+    one, two = SwarmLink(a, keys, 1, time.time), SwarmLink(b, keys, 2, time.time)
+    try:
+        time.sleep(0.3)
+        one.publish(state(1, 1, time.time()))
+        a.put(keys.obstacles(2), ObstaclesMsg(2, 1, time.time(), np.array([[1.0, 2.0]]),
+                                              np.array([0.5])).encode())
+        a.put(keys.mission, MissionMsg(1, time.time(), time.time(), (0.0, 0.0), (1.0, 0.0),
+                                       0.0, np.array([1, 2]), np.zeros((2, 2))).encode())
+        a.put(keys.state(5), b"\x01\x01bad")
+        assert wait_for(lambda: two.mission() is not None and two.obstacles() is not None
+                        and 1 in two.neighbours())
+        assert two.obstacles().radii.tolist() == [0.5] and one.mission().ids.tolist() == [1, 2]
+        assert 2 not in two.neighbours()                        # own state not a neighbour
+        assert wait_for(lambda: rec.recorded >= 3)
+    finally:
+        one.close()
+        two.close()
+        rec.close()
+    kinds = [kind for _, kind, _, _ in read_messages(tmp_path / "run.mcap")]
+    assert {"state", "obstacles", "mission"} <= set(kinds)
+    assert rec.dropped["size"] == 1

@@ -24,7 +24,8 @@ from typing import Callable, Generic, Iterable, Mapping, TypeVar
 
 import zenoh
 
-from transport.payloads import PayloadError, Received
+from transport.payloads import (MissionMsg, ObstaclesMsg, PayloadError, Received,
+                                StateMsg)
 
 log = logging.getLogger(__name__)
 
@@ -184,3 +185,43 @@ class Presence:
 
     def close(self) -> None:
         self._sub.undeclare()
+
+
+class SwarmLink:
+    """One agent's Zenoh link (agent.ports.SwarmPort): its state out; neighbours, its
+    obstacles and the mission in; a liveliness token while it runs."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
+                 clock: Callable[[], float]):
+        self.keys, self.robot_id = keys, robot_id
+        self._pub = session.declare_publisher(keys.state(robot_id))
+        self._token = session.liveliness().declare_token(keys.robot(robot_id))
+        self.states = Latest(session, keys.state("*"), StateMsg.decode, clock,
+                             ignore=[robot_id])
+        self._obstacles = Latest(session, keys.obstacles(robot_id), ObstaclesMsg.decode, clock)
+        self._mission = Latest(session, keys.mission, MissionMsg.decode, clock)
+
+    def publish(self, state: StateMsg) -> None:
+        self._pub.put(state.encode())
+
+    def neighbours(self) -> Mapping[int, Received[StateMsg]]:
+        return self.states.snapshot()
+
+    def obstacles(self) -> ObstaclesMsg | None:
+        got = self._obstacles.snapshot().get(self.robot_id)
+        return got.msg if got else None
+
+    def mission(self) -> MissionMsg | None:
+        got = self._mission.snapshot().get(0)
+        return got.msg if got else None
+
+    def counters(self) -> dict:
+        return {"states": self.states.counters(), "obstacles": self._obstacles.counters(),
+                "mission": self._mission.counters()}
+
+    def close(self) -> None:
+        """Drop the liveliness token (the swarm sees this robot leave) and the subscribers."""
+        self._token.undeclare()
+        for sub in (self.states, self._obstacles, self._mission):
+            sub.close()
+        self._pub.undeclare()
