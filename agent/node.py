@@ -81,11 +81,13 @@ class Agent:
         self._last_law = None              # monotonic time of the last law step
         self._mission_key: tuple | None = None
         self._formation: Formation | None = None
+        self._armed_at = -math.inf         # monotonic time of the last arm request
 
     # --- commands (from the process, a ground station or autostart) ---------------------
     def arm(self) -> None:
         self.motor.arm()
         self.failsafe = None
+        self._armed_at = self.clock.monotonic()
         if self.mode is AgentMode.DISARMED:
             self.mode = AgentMode.HOLD
         log.info("robot %d armed", self.s.robot_id)
@@ -123,7 +125,7 @@ class Agent:
         v = u = 0.0
         self.law_mode = Mode.TRACK
         if self.mode is not AgentMode.DISARMED:
-            self._check_feedback(fb)
+            self._check_feedback(fb, now_m)
             if self.mode is AgentMode.FORMATION and self.failsafe is None:
                 v, u = self._formation_step(pose, mission, now_m, now_w)
         else:
@@ -146,12 +148,17 @@ class Agent:
             self.command = (0.0, 0.0)
         self._publish(pose, now_w)
 
-    def _check_feedback(self, fb: WheelFeedback | None) -> None:
+    def _check_feedback(self, fb: WheelFeedback | None, now_m: float) -> None:
+        """Failsafe on lost feedback, a driver error, or drivers that do not enter closed
+        loop; the drivers get one feedback timeout after an arm request to answer."""
         reason = None
+        settling = now_m - self._armed_at <= self.s.feedback_timeout
         if fb is None or fb.age > self.s.feedback_timeout:
-            reason = "driver feedback lost"
+            reason = None if settling else "driver feedback lost"
         elif fb.errors:
             reason = "driver error: " + ", ".join(fb.errors)
+        elif not fb.closed_loop and not settling:
+            reason = "drivers not in closed loop control"
         if reason and self.failsafe is None:
             self.failsafe = reason
             self.counters.failsafes += 1

@@ -142,3 +142,14 @@ def test_mode_requests_are_validated():
     assert agent.set_mode(AgentMode.DISARMED) == "use disarm to disarm"
     agent.shutdown()
     assert agent.mode is AgentMode.DISARMED and not agent.motor.armed
+
+
+def test_drivers_get_one_feedback_timeout_to_answer_an_arm():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(20.0, 0.0))
+    agent.motor.silent = True
+    agent.arm()
+    agent.set_mode(AgentMode.FORMATION)
+    run(clock, [agent], 0.15)
+    assert agent.failsafe is None
+    run(clock, [agent], 0.2)
+    assert agent.failsafe == "driver feedback lost"
