@@ -1,0 +1,241 @@
+"""Emulated ODrive (v0.6 CAN Simple) wheel drivers: the firmware contract, on a CAN bus.
+
+:class:`EmulatedAxis` is the pure firmware model of one axis (no I/O, time passed in):
+
+* states IDLE and CLOSED_LOOP_CONTROL; a request for closed loop is refused (the axis stays
+  IDLE) while an error is active; motion only in CLOSED_LOOP_CONTROL;
+* velocity control with VEL_RAMP: the set-point is clamped to vel_limit and the velocity
+  follows it at ``ramp`` rev/s^2; other control/input modes are accepted but not emulated
+  (the axis holds zero velocity);
+* watchdog: no Set_Input_Vel for ``watchdog`` s in closed loop -> WATCHDOG_TIMER_EXPIRED and
+  IDLE; Estop -> ESTOP_REQUESTED and IDLE; in IDLE the wheel coasts down (first order,
+  ``coast_tau``); Clear_Errors clears the errors;
+* the encoder position integrates the actual wheel speed; bus voltage and a current that
+  grows with acceleration and speed.
+
+:class:`DriverPair` serves the axes of one robot on its bus: commands in, Heartbeat (100 ms)
+and Get_Encoder_Estimates (10 ms) out, remote requests answered; malformed frames ignored
+and counted. Fault injection: silence a node, drop or delay a fraction of the frames it
+sends (seeded RNG), raise an error bit.
+"""
+from __future__ import annotations
+
+import heapq
+import logging
+import math
+import random
+from collections import Counter
+from dataclasses import dataclass, field
+
+import can
+
+from transport.odrive_frames import (AxisError, AxisState, Cmd, ControlMode, FrameError,
+                                     InputMode, decode, encode)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class EmulatedAxis:
+    """One axis of emulated firmware; all times in seconds, speeds in rev/s."""
+
+    vel_limit: float = 10.0          # rev/s
+    ramp: float = 1000.0             # rev/s^2
+    watchdog: float = 0.1            # s, 0 disables
+    coast_tau: float = 0.3           # s, spin-down time constant when IDLE
+    bus_voltage: float = 24.0        # V
+    state: AxisState = AxisState.IDLE
+    error: int = 0                   # AxisError bits
+    control_mode: int = ControlMode.VELOCITY_CONTROL
+    input_mode: int = InputMode.VEL_RAMP
+    setpoint: float = 0.0            # rev/s, after the clamp
+    vel: float = 0.0                 # rev/s, actual
+    pos: float = 0.0                 # rev
+    current: float = 0.0             # A
+    watchdog_trips: int = 0
+    _since_input: float = 0.0
+
+    def request_state(self, requested: int) -> None:
+        if requested == AxisState.CLOSED_LOOP_CONTROL:
+            if self.error:
+                log.info("closed loop refused: error %s", AxisError(self.error))
+                return
+            self.state = AxisState.CLOSED_LOOP_CONTROL
+            self.setpoint = 0.0
+            self._since_input = 0.0
+        elif requested == AxisState.IDLE:
+            self.state = AxisState.IDLE
+
+    def input_vel(self, vel: float) -> None:
+        self.setpoint = max(-self.vel_limit, min(self.vel_limit, vel))
+        self._since_input = 0.0
+
+    def set_limits(self, vel_limit: float, current_limit: float) -> None:
+        if vel_limit > 0 and math.isfinite(vel_limit):
+            self.vel_limit = vel_limit
+            self.setpoint = max(-vel_limit, min(vel_limit, self.setpoint))
+
+    def estop(self) -> None:
+        self.error |= AxisError.ESTOP_REQUESTED
+        self.state = AxisState.IDLE
+
+    def clear_errors(self) -> None:
+        self.error = 0
+
+    def step(self, dt: float) -> None:
+        """Advance the axis by ``dt``: watchdog, ramp or coast, encoder."""
+        before = self.vel
+        if self.state == AxisState.CLOSED_LOOP_CONTROL:
+            self._since_input += dt
+            if self.watchdog and self._since_input > self.watchdog:
+                self.error |= AxisError.WATCHDOG_TIMER_EXPIRED
+                self.state = AxisState.IDLE
+                self.watchdog_trips += 1
+                log.warning("watchdog expired after %.3f s without a command",
+                            self._since_input)
+        if self.state == AxisState.CLOSED_LOOP_CONTROL:
+            target = self.setpoint if (self.control_mode == ControlMode.VELOCITY_CONTROL
+                                       and self.input_mode == InputMode.VEL_RAMP) else 0.0
+            step = self.ramp * dt
+            self.vel += max(-step, min(step, target - self.vel))
+        else:
+            self.vel *= math.exp(-dt / self.coast_tau)
+            if abs(self.vel) < 1e-4:
+                self.vel = 0.0
+        self.pos += 0.5 * (before + self.vel) * dt
+        accel = (self.vel - before) / dt if dt > 0 else 0.0
+        self.current = 0.05 * abs(accel) + 0.02 * abs(self.vel) + (
+            0.1 if self.state == AxisState.CLOSED_LOOP_CONTROL else 0.0)
+
+
+@dataclass
+class Faults:
+    """Injected faults of one node."""
+
+    silent: bool = False             # sends nothing
+    drop: float = 0.0                # fraction of its frames dropped
+    delay: float = 0.0               # s, its frames are sent this late
+
+
+@dataclass
+class DriverPair:
+    """The emulated drivers of one robot: ``nodes`` = (right, left) node ids on ``bus``."""
+
+    bus: can.BusABC
+    right_node: int = 1
+    left_node: int = 0
+    heartbeat_period: float = 0.1
+    encoder_period: float = 0.01
+    axes: dict = field(default_factory=dict)
+    faults: dict = field(default_factory=dict)
+    rng: random.Random = field(default_factory=lambda: random.Random(0))
+    ignored: Counter = field(default_factory=Counter)
+    sent: int = 0
+    _next: dict = field(default_factory=dict)
+    _queue: list = field(default_factory=list)
+    _now: float = 0.0
+
+    def __post_init__(self) -> None:
+        for node in (self.right_node, self.left_node):
+            self.axes.setdefault(node, EmulatedAxis())
+            self.faults.setdefault(node, Faults())
+
+    def configure(self, **axis_settings) -> None:
+        """Set emulation parameters on both axes (vel_limit, ramp, watchdog, ...)."""
+        for axis in self.axes.values():
+            for key, value in axis_settings.items():
+                setattr(axis, key, value)
+
+    # --- CAN side ---------------------------------------------------------------------------
+    def service(self, now: float) -> None:
+        """Handle every frame waiting on the bus, then send what is due at ``now`` [s]."""
+        self._now = now
+        while (msg := self.bus.recv(0.0)) is not None:
+            self._handle(msg)
+        for node, axis in self.axes.items():
+            due = self._next.setdefault(node, {Cmd.HEARTBEAT: now,
+                                               Cmd.GET_ENCODER_ESTIMATES: now})
+            if now >= due[Cmd.HEARTBEAT]:
+                due[Cmd.HEARTBEAT] = max(due[Cmd.HEARTBEAT] + self.heartbeat_period, now)
+                self._emit(node, self._heartbeat(node, axis))
+            if now >= due[Cmd.GET_ENCODER_ESTIMATES]:
+                due[Cmd.GET_ENCODER_ESTIMATES] = max(
+                    due[Cmd.GET_ENCODER_ESTIMATES] + self.encoder_period, now)
+                self._emit(node, encode(node, Cmd.GET_ENCODER_ESTIMATES,
+                                        Pos_Estimate=axis.pos, Vel_Estimate=axis.vel))
+        while self._queue and self._queue[0][0] <= now:
+            _, _, msg = heapq.heappop(self._queue)
+            self._send(msg)
+
+    def _heartbeat(self, node: int, axis: EmulatedAxis) -> can.Message:
+        return encode(node, Cmd.HEARTBEAT, Axis_Error=int(axis.error),
+                      Axis_State=int(axis.state), Procedure_Result=0, Trajectory_Done_Flag=0)
+
+    def _emit(self, node: int, msg: can.Message) -> None:
+        f = self.faults[node]
+        if f.silent or (f.drop and self.rng.random() < f.drop):
+            return
+        if f.delay > 0:
+            heapq.heappush(self._queue, (self._now + f.delay, self.sent + len(self._queue), msg))
+        else:
+            self._send(msg)
+
+    def _send(self, msg: can.Message) -> None:
+        try:
+            self.bus.send(msg)
+            self.sent += 1
+        except can.CanError as exc:
+            log.warning("emulated driver could not send: %s", exc)
+
+    def _handle(self, msg: can.Message) -> None:
+        try:
+            frame = decode(msg)
+        except FrameError as exc:
+            self.ignored[exc.reason] += 1
+            return
+        axis = self.axes.get(frame.node)
+        if axis is None:
+            return                                    # another node on the bus
+        if frame.rtr:
+            self._answer(frame.node, frame.cmd, axis)
+            return
+        s = frame.signals
+        if frame.cmd == Cmd.SET_INPUT_VEL:
+            axis.input_vel(s["Input_Vel"])
+        elif frame.cmd == Cmd.SET_AXIS_STATE:
+            axis.request_state(int(s["Axis_Requested_State"]))
+        elif frame.cmd == Cmd.SET_CONTROLLER_MODE:
+            axis.control_mode, axis.input_mode = int(s["Control_Mode"]), int(s["Input_Mode"])
+        elif frame.cmd == Cmd.SET_LIMITS:
+            axis.set_limits(s["Velocity_Limit"], s["Current_Limit"])
+        elif frame.cmd == Cmd.ESTOP:
+            axis.estop()
+        elif frame.cmd == Cmd.CLEAR_ERRORS:
+            axis.clear_errors()
+        # data frames of what drivers send (heartbeats of a neighbour node...) are not ours
+
+    def _answer(self, node: int, cmd: Cmd, axis: EmulatedAxis) -> None:
+        if cmd == Cmd.GET_ENCODER_ESTIMATES:
+            reply = encode(node, cmd, Pos_Estimate=axis.pos, Vel_Estimate=axis.vel)
+        elif cmd == Cmd.GET_BUS_VOLTAGE_CURRENT:
+            reply = encode(node, cmd, Bus_Voltage=axis.bus_voltage, Bus_Current=axis.current)
+        elif cmd == Cmd.GET_ERROR:
+            reply = encode(node, cmd, Active_Errors=int(axis.error), Disarm_Reason=int(axis.error))
+        elif cmd == Cmd.HEARTBEAT:
+            reply = self._heartbeat(node, axis)
+        else:
+            self.ignored["rtr_unsupported"] += 1
+            return
+        self._emit(node, reply)
+
+    # --- physics side -------------------------------------------------------------------------
+    def step(self, dt: float) -> None:
+        for axis in self.axes.values():
+            axis.step(dt)
+
+    def wheel_velocities(self) -> tuple[float, float]:
+        """(right, left) actual wheel speeds [rev/s]."""
+        return self.axes[self.right_node].vel, self.axes[self.left_node].vel
+
+    def close(self) -> None:
+        self.bus.shutdown()

@@ -1,0 +1,136 @@
+"""ODrive CAN Simple (v0.6) frames, encoded and decoded from the project's DBC by cantools.
+
+The DBC (``transport/odrive.dbc``) is the one source of truth for layouts, units, value
+tables and cycle times; this module builds python-can messages from it and decodes them, at
+both ends (the agent's host side and the emulated firmware). No byte is packed by hand.
+
+Node ids: arbitration id = node_id << 5 | cmd_id. The DBC lists every message for nodes 0
+and 1 (so ``cantools decode`` reads a capture of a default robot); this module uses the
+node-0 layouts for any node id 0..63 by masking the node bits.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import resources
+
+import can
+import cantools
+
+MAX_NODE = 63
+
+
+class Cmd(enum.IntEnum):
+    HEARTBEAT = 0x001
+    ESTOP = 0x002
+    GET_ERROR = 0x003
+    SET_AXIS_STATE = 0x007
+    GET_ENCODER_ESTIMATES = 0x009
+    SET_CONTROLLER_MODE = 0x00B
+    SET_INPUT_VEL = 0x00D
+    SET_LIMITS = 0x00F
+    GET_BUS_VOLTAGE_CURRENT = 0x017
+    CLEAR_ERRORS = 0x018
+
+
+@lru_cache(maxsize=1)
+def database() -> cantools.database.can.Database:
+    """The project's DBC, loaded once."""
+    text = resources.files("transport").joinpath("odrive.dbc").read_text()
+    return cantools.database.load_string(text, database_format="dbc")
+
+
+def _layout(cmd: Cmd) -> cantools.database.can.Message:
+    return database().get_message_by_frame_id(int(cmd))
+
+
+def _choices(message: str, signal: str) -> dict[int, str]:
+    sig = database().get_message_by_name(f"Axis0_{message}").get_signal_by_name(signal)
+    return {int(k): str(v) for k, v in sig.choices.items()}
+
+
+AxisState = enum.IntEnum("AxisState", {v: k for k, v in
+                                       _choices("Heartbeat", "Axis_State").items()})
+AxisState.__doc__ = "ODrive axis states (from the DBC value table)."
+AxisError = enum.IntFlag("AxisError", {v: k for k, v in
+                                       _choices("Heartbeat", "Axis_Error").items() if k})
+AxisError.__doc__ = "ODrive axis error bits (from the DBC value table)."
+ControlMode = enum.IntEnum("ControlMode", {v: k for k, v in
+                                           _choices("Set_Controller_Mode", "Control_Mode").items()})
+InputMode = enum.IntEnum("InputMode", {v: k for k, v in
+                                       _choices("Set_Controller_Mode", "Input_Mode").items()})
+
+
+def error_names(bits: int) -> tuple[str, ...]:
+    """Names of the error bits set in ``bits`` (unknown bits as hex)."""
+    names = tuple(e.name for e in sorted(AxisError, key=lambda e: e.value) if bits & e.value)
+    rest = bits & ~sum(e.value for e in AxisError)
+    return names + ((f"0x{rest:x}",) if rest else ())
+
+
+def arbitration_id(node: int, cmd: Cmd) -> int:
+    if not 0 <= node <= MAX_NODE:
+        raise ValueError(f"ODrive node id must be 0..{MAX_NODE}, got {node}")
+    return node << 5 | int(cmd)
+
+
+class FrameError(ValueError):
+    """A frame to ignore; ``reason``: unknown_id, dlc or nonfinite."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A decoded frame: node, command, raw signal values (numbers), remote request?"""
+
+    node: int
+    cmd: Cmd
+    signals: dict
+    rtr: bool = False
+
+
+def encode(node: int, cmd: Cmd, **signals: float) -> can.Message:
+    """A data frame of ``cmd`` for ``node`` with the given signal values."""
+    layout = _layout(cmd)
+    data = layout.encode(signals, strict=True) if layout.signals else b""
+    return can.Message(arbitration_id=arbitration_id(node, cmd), data=data,
+                       is_extended_id=False)
+
+
+def request(node: int, cmd: Cmd) -> can.Message:
+    """A remote (RTR) request for ``cmd``: the drivers answer with the data frame."""
+    return can.Message(arbitration_id=arbitration_id(node, cmd), is_remote_frame=True,
+                       dlc=_layout(cmd).length, is_extended_id=False)
+
+
+def decode(msg: can.Message) -> Frame:
+    """Decode a received frame; raises :class:`FrameError` for one to ignore."""
+    if msg.is_extended_id or msg.is_error_frame or msg.arbitration_id > 0x7FF:
+        raise FrameError("unknown_id", f"0x{msg.arbitration_id:x} is not an 11-bit ODrive id")
+    node, cmd_id = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
+    try:
+        cmd = Cmd(cmd_id)
+    except ValueError:
+        raise FrameError("unknown_id", f"command 0x{cmd_id:02x} of node {node}") from None
+    layout = _layout(cmd)
+    if msg.is_remote_frame:
+        return Frame(node, cmd, {}, rtr=True)
+    if len(msg.data) != layout.length:
+        raise FrameError("dlc", f"{cmd.name} of node {node}: {len(msg.data)} bytes, "
+                                f"expected {layout.length}")
+    signals = (layout.decode(bytes(msg.data), decode_choices=False, scaling=False)
+               if layout.signals else {})
+    if any(isinstance(v, float) and not math.isfinite(v) for v in signals.values()):
+        raise FrameError("nonfinite", f"{cmd.name} of node {node}: {signals}")
+    return Frame(node, cmd, signals)
+
+
+def cycle_time(cmd: Cmd) -> float | None:
+    """The DBC cycle time [s] of a cyclic message, or None."""
+    ms = _layout(cmd).cycle_time
+    return ms / 1000.0 if ms else None

@@ -1,0 +1,128 @@
+"""The host side of a robot's two ODrive wheel drivers (agent.ports.MotorPort).
+
+Arming: clear errors, velocity control with VEL_RAMP, limits, CLOSED_LOOP_CONTROL. Every
+period the agent sends both wheel velocities [rev/s] (which also feeds the drivers'
+watchdogs). Feedback is drained without blocking: heartbeats (state, errors) and encoder
+estimates per axis, each with its age on the injected monotonic clock. Shutdown: zero
+velocity, then IDLE. Frames that do not decode are ignored and counted.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+from dataclasses import dataclass
+from typing import Callable
+
+import can
+
+from agent.ports import WheelFeedback
+from transport.odrive_frames import (AxisState, Cmd, ControlMode, FrameError, InputMode,
+                                     decode, encode, error_names)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class AxisStatus:
+    """What one driver last reported, with the monotonic times [s] it arrived."""
+
+    state: int = AxisState.UNDEFINED
+    error: int = 0
+    pos: float = 0.0            # rev
+    vel: float = 0.0            # rev/s
+    heartbeat_at: float = -float("inf")
+    encoder_at: float = -float("inf")
+
+    @property
+    def error_names(self) -> tuple[str, ...]:
+        return error_names(self.error)
+
+
+class WheelDrivers:
+    """Left and right ODrive axes on one bus; + wheel velocity drives the robot forward."""
+
+    def __init__(self, bus: can.BusABC, left_node: int = 0, right_node: int = 1,
+                 vel_limit: float = 10.0, current_limit: float = 20.0,
+                 clock: Callable[[], float] = time.monotonic):
+        self.bus, self.clock = bus, clock
+        self.left_node, self.right_node = left_node, right_node
+        self.vel_limit, self.current_limit = vel_limit, current_limit
+        self.status = {left_node: AxisStatus(), right_node: AxisStatus()}
+        self.ignored: Counter = Counter()
+        self.sent = 0
+
+    def _send(self, msg: can.Message) -> None:
+        try:
+            self.bus.send(msg)
+            self.sent += 1
+        except can.CanError as exc:
+            self.ignored["send_failed"] += 1
+            log.warning("CAN send failed: %s", exc)
+
+    def _both(self, cmd: Cmd, **signals: float) -> None:
+        for node in (self.left_node, self.right_node):
+            self._send(encode(node, cmd, **signals))
+
+    def arm(self) -> None:
+        self.clear_errors()
+        self._both(Cmd.SET_CONTROLLER_MODE, Control_Mode=ControlMode.VELOCITY_CONTROL,
+                   Input_Mode=InputMode.VEL_RAMP)
+        self._both(Cmd.SET_LIMITS, Velocity_Limit=self.vel_limit,
+                   Current_Limit=self.current_limit)
+        self._both(Cmd.SET_INPUT_VEL, Input_Vel=0.0, Input_Torque_FF=0.0)
+        self._both(Cmd.SET_AXIS_STATE, Axis_Requested_State=AxisState.CLOSED_LOOP_CONTROL)
+
+    def disarm(self) -> None:
+        self._both(Cmd.SET_INPUT_VEL, Input_Vel=0.0, Input_Torque_FF=0.0)
+        self._both(Cmd.SET_AXIS_STATE, Axis_Requested_State=AxisState.IDLE)
+
+    def command(self, right_rev_s: float, left_rev_s: float) -> None:
+        self._send(encode(self.right_node, Cmd.SET_INPUT_VEL, Input_Vel=right_rev_s,
+                          Input_Torque_FF=0.0))
+        self._send(encode(self.left_node, Cmd.SET_INPUT_VEL, Input_Vel=left_rev_s,
+                          Input_Torque_FF=0.0))
+
+    def clear_errors(self) -> None:
+        self._both(Cmd.CLEAR_ERRORS)
+
+    def estop(self) -> None:
+        self._both(Cmd.ESTOP)
+
+    def poll(self) -> int:
+        """Drain every waiting frame (never blocks); returns how many were used."""
+        used = 0
+        while (msg := self.bus.recv(0.0)) is not None:
+            try:
+                frame = decode(msg)
+            except FrameError as exc:
+                self.ignored[exc.reason] += 1
+                continue
+            st = self.status.get(frame.node)
+            if st is None or frame.rtr:
+                continue
+            now = self.clock()
+            if frame.cmd == Cmd.HEARTBEAT:
+                st.state, st.error = int(frame.signals["Axis_State"]), int(
+                    frame.signals["Axis_Error"])
+                st.heartbeat_at = now
+                used += 1
+            elif frame.cmd == Cmd.GET_ENCODER_ESTIMATES:
+                st.pos, st.vel = frame.signals["Pos_Estimate"], frame.signals["Vel_Estimate"]
+                st.encoder_at = now
+                used += 1
+        return used
+
+    def feedback(self) -> WheelFeedback | None:
+        self.poll()
+        r, l_ = self.status[self.right_node], self.status[self.left_node]
+        if r.encoder_at == -float("inf") or l_.encoder_at == -float("inf"):
+            return None
+        now = self.clock()
+        errors = tuple(f"{side}: {name}" for side, st in (("right", r), ("left", l_))
+                       for name in st.error_names)
+        return WheelFeedback(pos_rev=(r.pos, l_.pos), vel_rev_s=(r.vel, l_.vel),
+                             age=now - min(r.encoder_at, l_.encoder_at),
+                             closed_loop=(r.state == AxisState.CLOSED_LOOP_CONTROL
+                                          and l_.state == AxisState.CLOSED_LOOP_CONTROL),
+                             errors=errors)
