@@ -21,6 +21,7 @@ from hil import run_folder
 from hil.console import LazyProgress, summary_table
 from hil.figures import draw_figures
 from hil.scenario import ScenarioError, load_scenario
+from transport.canbus import BusOpenError
 
 EXIT_OK, EXIT_UNSAFE, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -70,6 +71,56 @@ def cmd_report(args: argparse.Namespace, console: Console) -> int:
     return EXIT_OK
 
 
+def cmd_agent(args: argparse.Namespace, console: Console) -> int:
+    """One agent process (what runs on a robot computer)."""
+    from agent.process import run_agent
+    from agent.settings import load_settings
+    settings = load_settings(args.config)
+    run_agent(settings, Path(args.stats) if args.stats else None)
+    return EXIT_OK
+
+
+def _can_ports(args: argparse.Namespace, ids: list[int]) -> dict[int, int]:
+    return {rid: args.can_base_port + rid for rid in ids} if args.can_base_port else {}
+
+
+def cmd_plant(args: argparse.Namespace, console: Console) -> int:
+    """The SITL plant, or one robot's emulated drivers only (HIL bench)."""
+    from firmware_sim.odrive_sim import DriverPair
+    from firmware_sim.plant_process import run_drivers_only, run_sitl_plant
+    from transport.canbus import open_bus
+    if args.drivers_only:
+        bus = open_bus(args.can_interface, args.can_channel, port=args.can_port)
+        drivers = DriverPair(bus, right_node=args.right_node, left_node=args.left_node)
+        drivers.configure(vel_limit=args.vel_limit, ramp=args.ramp, watchdog=args.watchdog)
+        console.print(f"emulated drivers (nodes {args.left_node} left, {args.right_node} "
+                      f"right) on {args.can_interface} {args.can_channel or ''}; Ctrl-C stops")
+        run_drivers_only(drivers)
+        return EXIT_OK
+    if not (args.scenario and args.swarm and args.zenoh_connect):
+        raise ValueError("plant: give --drivers-only, or --scenario, --swarm and "
+                         "--zenoh-connect for a SITL plant")
+    sc = load_scenario(args.scenario)
+    ids = [int(x) for x in args.robots.split(",")] if args.robots else [int(i) for i in sc.ids]
+    unknown = sorted(set(ids) - {int(i) for i in sc.ids})
+    if unknown:
+        raise ValueError(f"plant: robots {unknown} are not in {args.scenario}")
+    stats = run_sitl_plant(sc, ids, args.swarm, args.zenoh_connect, args.can_interface,
+                           args.can_channel, _can_ports(args, ids), watchdog=args.watchdog)
+    if args.stats:
+        Path(args.stats).write_text(json.dumps(stats, indent=2) + "\n")
+    return EXIT_OK
+
+
+def add_can_options(p: argparse.ArgumentParser, default_interface: str = "udp_multicast"
+                    ) -> None:
+    """CAN options in python-can's own names."""
+    p.add_argument("--can-interface", default=default_interface,
+                   help="python-can interface: socketcan, udp_multicast, virtual or auto")
+    p.add_argument("--can-channel", help="socketcan: vcan0/can0; udp_multicast: an "
+                                         "interface-local group ff11::...")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="boundswarm", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -88,6 +139,30 @@ def build_parser() -> argparse.ArgumentParser:
                      help="refuse a configuration that breaks the braking margin")
     sim.set_defaults(func=cmd_sim)
 
+    agent = sub.add_parser("agent", help="one agent process (what runs on a robot computer)")
+    agent.add_argument("--config", required=True, help="agent config file (TOML)")
+    agent.add_argument("--stats", help="write loop and link statistics (JSON) at exit")
+    agent.set_defaults(func=cmd_agent)
+
+    plant = sub.add_parser("plant", help="the SITL plant, or emulated drivers only")
+    plant.add_argument("--drivers-only", action="store_true",
+                       help="serve one robot's two emulated drivers on the bus (HIL bench)")
+    add_can_options(plant)
+    plant.add_argument("--can-port", type=int, help="udp_multicast port of the bus")
+    plant.add_argument("--can-base-port", type=int,
+                       help="SITL: robot ID's udp_multicast bus is on port BASE + ID")
+    plant.add_argument("--left-node", type=int, default=0, help="left wheel node id")
+    plant.add_argument("--right-node", type=int, default=1, help="right wheel node id")
+    plant.add_argument("--vel-limit", type=float, default=10.0, help="rev/s")
+    plant.add_argument("--ramp", type=float, default=1000.0, help="rev/s^2")
+    plant.add_argument("--watchdog", type=float, default=0.1, help="s (0 disables)")
+    plant.add_argument("--scenario", help="SITL: scenario file")
+    plant.add_argument("--robots", help="SITL: comma-separated robot ids to host (default all)")
+    plant.add_argument("--swarm", help="SITL: swarm name (Zenoh key prefix)")
+    plant.add_argument("--zenoh-connect", action="append", help="SITL: router endpoint")
+    plant.add_argument("--stats", help="write loop statistics (JSON) at exit")
+    plant.set_defaults(func=cmd_plant)
+
     report = sub.add_parser("report", help="figures and metrics from a recorded run")
     report.add_argument("run", help="run folder written by sim or sitl")
     report.set_defaults(func=cmd_report)
@@ -101,7 +176,8 @@ def main(argv: list[str] | None = None) -> int:
     console = Console()
     try:
         return args.func(args, console)
-    except (ScenarioError, ConfigError, run_folder.RunFolderError, ValueError) as exc:
+    except (ScenarioError, ConfigError, run_folder.RunFolderError, ValueError,
+            BusOpenError, ConnectionError) as exc:
         print(f"boundswarm {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -1,0 +1,83 @@
+"""The plant as a process: emulated drivers (and, in SITL, the robots' motion) in real time.
+
+* :func:`run_drivers_only` serves one robot's two emulated drivers on a bus: the HIL bench
+  where a PC with a CAN adapter stands in for the motor drivers of a real robot computer.
+* :func:`run_sitl_plant` hosts several robots of a scenario: each robot's drivers on its own
+  bus, motion from the drivers' actual wheel speeds, truth and obstacle detections on Zenoh.
+
+Both run a fixed-rate loop (physics step ``dt``) on the system clock until SIGINT/SIGTERM.
+"""
+from __future__ import annotations
+
+import logging
+import signal
+from typing import Callable
+
+import numpy as np
+
+from agent.loop import FixedRateLoop, SystemClock
+from firmware_sim.odrive_sim import DriverPair
+from firmware_sim.sitl_plant import PlantRobot, SitlPlant
+from transport.canbus import open_bus
+from transport.zenoh_link import Keys, open_session, session_config
+
+log = logging.getLogger(__name__)
+
+
+def _stop_on_signals(stop: Callable[[], None]) -> None:
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop())
+
+
+def run_drivers_only(drivers: DriverPair, dt: float = 0.001,
+                     max_ticks: int | None = None) -> None:
+    """Serve ``drivers`` until a signal (or ``max_ticks``)."""
+    clock = SystemClock()
+    loop = FixedRateLoop(dt, clock)
+    _stop_on_signals(loop.stop)
+
+    def tick(k: int, deadline: float) -> None:
+        drivers.service(clock.monotonic())
+        drivers.step(dt)
+
+    try:
+        loop.run(tick, max_ticks=max_ticks)
+    finally:
+        drivers.close()
+        log.info("drivers stopped after %d ticks (%d overruns)", loop.stats.ticks,
+                 loop.stats.overruns)
+
+
+def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str],
+                   can_interface: str, can_channel: str | None, can_ports: dict[int, int],
+                   dt: float = 0.002, watchdog: float = 0.1) -> dict:
+    """Host robots ``robot_ids`` of ``scenario`` until a signal; returns loop statistics."""
+    clock = SystemClock()
+    keys = Keys(swarm)
+    session = open_session(session_config("client", connect=connect), "the plant")
+    robots: list[PlantRobot] = []
+    try:
+        index = {int(rid): i for i, rid in enumerate(scenario.ids)}
+        r = scenario.robot
+        for rid in robot_ids:
+            bus = open_bus(can_interface, can_channel, port=can_ports.get(rid))
+            drivers = DriverPair(bus)
+            drivers.configure(vel_limit=r.wheel_speed_limit, ramp=r.wheel_ramp,
+                              watchdog=watchdog)
+            robots.append(PlantRobot(rid, np.array(scenario.poses[index[rid]], float), drivers))
+        publishers = {(kind, rid): session.declare_publisher(getattr(keys, kind)(rid))
+                      for rid in robot_ids for kind in ("truth", "obstacles")}
+        plant = SitlPlant(robots, r, scenario.obstacles, scenario.sensing_range,
+                          lambda kind, rid, data: publishers[(kind, rid)].put(data))
+        loop = FixedRateLoop(dt, clock)
+        _stop_on_signals(loop.stop)
+        loop.run(lambda k, d: plant.step(dt, clock.monotonic(), clock.wall()))
+        stats = loop.stats.summary()
+        stats["watchdog_trips"] = {rb.robot_id: sum(a.watchdog_trips
+                                                     for a in rb.drivers.axes.values())
+                                   for rb in robots}
+        return stats
+    finally:
+        for rb in robots:
+            rb.drivers.close()
+        session.close()

@@ -1,0 +1,100 @@
+"""Bus selection, the echo filter of udp_multicast, and two processes on one robot bus."""
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import pytest
+
+from transport.canbus import BusOpenError, EchoFilteredBus, has_socketcan, open_bus
+from transport.wheel_drivers import WheelDrivers
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
+        s.bind(("::1", 0))
+        return s.getsockname()[1]
+
+
+def test_udp_multicast_hears_peers_but_not_itself():
+    port = free_udp_port()
+    a = open_bus("udp_multicast", "ff11::b5:9", port=port)
+    b = open_bus("udp_multicast", "ff11::b5:9", port=port)
+    try:
+        assert isinstance(a, EchoFilteredBus)
+        a.send(can.Message(arbitration_id=0x02D, data=bytes(8), is_extended_id=False))
+        got = b.recv(2.0)
+        assert got is not None and got.arbitration_id == 0x02D
+        assert a.recv(0.3) is None and a.echoes_dropped == 1
+    finally:
+        a.shutdown()
+        b.shutdown()
+
+
+def test_groups_that_could_leave_the_host_are_refused():
+    for group in ("ff15::1", "ff02::1", "239.1.1.1"):
+        with pytest.raises(BusOpenError, match="ff11|IPv6 multicast"):
+            open_bus("udp_multicast", group, port=free_udp_port())
+
+
+def test_socketcan_missing_is_a_clear_error():
+    if has_socketcan("vcan0"):
+        pytest.skip("this kernel has vcan0")
+    with pytest.raises(BusOpenError, match="'socketcan' channel 'vcan0'.*no SocketCAN"):
+        open_bus("socketcan", "vcan0")
+
+
+def test_auto_falls_back_to_udp_multicast_without_socketcan():
+    if has_socketcan("vcan0"):
+        pytest.skip("this kernel has vcan0")
+    bus = open_bus("auto", "vcan0", port=free_udp_port())
+    try:
+        assert "ff11" in str(bus.channel_info) or isinstance(bus, EchoFilteredBus)
+    finally:
+        bus.shutdown()
+
+
+def test_virtual_bus():
+    bus = open_bus("virtual", "unit-test-channel")
+    bus.shutdown()
+
+
+def test_host_and_drivers_in_two_processes_over_udp_multicast():
+    port = free_udp_port()
+    child = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli", "plant", "--drivers-only",
+         "--can-interface", "udp_multicast", "--can-channel", "ff11::b5:2",
+         "--can-port", str(port)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    bus = open_bus("udp_multicast", "ff11::b5:2", port=port)
+    try:
+        host = WheelDrivers(bus)
+        end = time.monotonic() + 15
+        while host.feedback() is None and time.monotonic() < end:
+            time.sleep(0.02)
+        assert host.feedback() is not None, "no feedback from the drivers process"
+        host.arm()
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 1.0:
+            host.command(3.0, 3.0)
+            time.sleep(0.02)
+        fb = host.feedback()
+        assert fb.closed_loop and fb.vel_rev_s == pytest.approx((3.0, 3.0), abs=0.01)
+        assert fb.age < 0.1
+        # stop commanding: the drivers' watchdog trips and the host names it
+        time.sleep(0.4)
+        fb = host.feedback()
+        assert "right: WATCHDOG_TIMER_EXPIRED" in fb.errors
+        assert host.ignored.get("dlc", 0) == 0
+    finally:
+        bus.shutdown()
+        child.terminate()
+        try:
+            child.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+    assert child.returncode in (0, -15), child.stdout.read().decode()
