@@ -46,6 +46,7 @@ class SitlPlant:
     def __init__(self, robots: list[PlantRobot], robot: RobotParams, obstacles: Obstacles,
                  sensing_range: float, publish: Callable[[str, int, bytes], None],
                  truth_every: int = 2, obstacles_period: float = 0.1):
+        """``truth_every``: publish truth every this many physics steps."""
         self.robots, self.params, self.obstacles = robots, robot, obstacles
         self.sensing_range, self.publish = sensing_range, publish
         self.truth_every, self.obstacles_period = truth_every, obstacles_period

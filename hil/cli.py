@@ -1,7 +1,8 @@
 """The ``boundswarm`` command line: parse, build the config, call the library, print.
 
 Exit codes: 0 success; 1 the run finished but was not safe (a collision); 2 bad input
-(scenario, config or run folder), with a message naming what is wrong.
+(scenario, config or run folder), with a message naming what is wrong; 3 (sitl) a process
+of the swarm was lost during the run; 4 (sitl) the swarm could not be run.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from hil.figures import draw_figures
 from hil.scenario import ScenarioError, load_scenario
 from transport.canbus import BusOpenError
 
-EXIT_OK, EXIT_UNSAFE, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_OK, EXIT_UNSAFE, EXIT_BAD_INPUT, EXIT_LOST, EXIT_FAILED = 0, 1, 2, 3, 4
 
 
 def cmd_sim(args: argparse.Namespace, console: Console) -> int:
@@ -53,6 +54,69 @@ def cmd_sim(args: argparse.Namespace, console: Console) -> int:
                                          f"{options.duration:g} s simulated in {elapsed:.2f} s"))
     console.print(f"metrics: {out / run_folder.METRICS}\nfigures: {out / run_folder.FIGURES}/")
     return EXIT_OK if metrics["collisions"] == 0 else EXIT_UNSAFE
+
+
+def _percentiles(values: list) -> dict:
+    import numpy as np
+    a = np.asarray([v for v in values if v is not None], dtype=float)
+    if not a.size:
+        return {"p50": None, "p99": None, "max": None}
+    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)),
+            "max": float(a.max())}
+
+
+def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
+    """The SITL swarm on a scenario, recorded into a run folder."""
+    from hil.sitl import SitlError, SitlOptions, run_sitl
+    from hil.sitl_report import analyse_recording
+    sc = load_scenario(args.scenario)
+    if args.duration:
+        import dataclasses
+        sc = dataclasses.replace(sc, duration=args.duration)
+    out = Path(args.out)
+    opts = SitlOptions(can_interface=args.can_interface, can_channel=args.can_channel,
+                       can_base_port=args.can_base_port,
+                       robots_per_plant=args.robots_per_plant, live=not args.no_live)
+    started = time.perf_counter()
+    try:
+        run = run_sitl(sc, out, opts, console)
+    except SitlError as exc:
+        print(f"boundswarm sitl: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    data, result, extra = analyse_recording(out / "run.mcap", sc)
+    metrics = result.summary(sc.name, sc.duration)
+    loops = {rid: st["loop"] for rid, st in run.agent_stats.items()}
+    metrics["sitl"] = {
+        "wall_seconds": round(time.perf_counter() - started, 2),
+        "agents_reporting": len(run.agent_stats),
+        "lost_processes": run.lost,
+        "deadline_misses": sum(lp["overruns"] for lp in loops.values()),
+        "period_jitter_ms": _percentiles([lp["jitter"]["p99_ms"] for lp in loops.values()]),
+        "jitter_p50_ms_per_agent": {r: lp["jitter"]["p50_ms"] for r, lp in loops.items()},
+        "jitter_p99_ms_per_agent": {r: lp["jitter"]["p99_ms"] for r, lp in loops.items()},
+        "jitter_max_ms_per_agent": {r: lp["jitter"]["max_ms"] for r, lp in loops.items()},
+        "compute_p99_ms_per_agent": {r: lp["compute"]["p99_ms"] for r, lp in loops.items()},
+        "neighbour_age_ms": {r: st["agent"]["neighbour_age_ms"]
+                             for r, st in run.agent_stats.items()},
+        "failsafes": {r: st["failsafe"] for r, st in run.agent_stats.items() if st["failsafe"]},
+        "can": {r: st["can"] for r, st in run.agent_stats.items()},
+        "zenoh_dropped": {r: st["zenoh"]["states"]["dropped"]
+                          for r, st in run.agent_stats.items()},
+        "watchdog_trips": {k: v for p in run.plant_stats
+                           for k, v in p.get("watchdog_trips", {}).items()},
+        "plant_overruns": sum(p["overruns"] for p in run.plant_stats),
+    }
+    run_folder.write_run(out, metrics, data, sc.source.read_text() if sc.source else None)
+    draw_figures(data, sc.obstacles, sc.control.a, sc.control.b, out / run_folder.FIGURES)
+    console.print(summary_table(metrics, f"SITL {sc.name}: {len(sc.ids)} agents"))
+    s = metrics["sitl"]
+    console.print(f"deadline misses: {s['deadline_misses']}, watchdog trips: "
+                  f"{sum(s['watchdog_trips'].values())}, lost: {s['lost_processes'] or 'none'}")
+    console.print(f"metrics: {out / run_folder.METRICS}\nfigures: {out / run_folder.FIGURES}/"
+                  f"\nrecording: {out / 'run.mcap'} (Foxglove, mcap tools)")
+    if metrics["collisions"]:
+        return EXIT_UNSAFE
+    return EXIT_LOST if run.lost else EXIT_OK
 
 
 def cmd_report(args: argparse.Namespace, console: Console) -> int:
@@ -138,6 +202,18 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--strict", action="store_true",
                      help="refuse a configuration that breaks the braking margin")
     sim.set_defaults(func=cmd_sim)
+
+    sitl = sub.add_parser("sitl", help="SITL swarm: router, plant, one agent process per robot")
+    sitl.add_argument("scenario", help="scenario file (TOML)")
+    sitl.add_argument("--out", required=True, help="run folder to write")
+    sitl.add_argument("--duration", type=float, help="override the scenario's duration [s]")
+    add_can_options(sitl)
+    sitl.add_argument("--can-base-port", type=int, default=43200,
+                      help="udp_multicast: robot ID's bus on port BASE + ID")
+    sitl.add_argument("--robots-per-plant", type=int, default=0,
+                      help="robots hosted by one plant process (0: all in one)")
+    sitl.add_argument("--no-live", action="store_true", help="no live status table")
+    sitl.set_defaults(func=cmd_sitl)
 
     agent = sub.add_parser("agent", help="one agent process (what runs on a robot computer)")
     agent.add_argument("--config", required=True, help="agent config file (TOML)")

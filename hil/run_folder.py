@@ -55,10 +55,11 @@ class RunData:
         m = res.metrics
         return cls(ids=res.ids, t=res.t, pose=res.pose, v=res.v, u=res.u, mode=res.mode,
                    ref=res.ref, dist_t=np.asarray(m.geometry_t),
-                   d_min=_nan_inf(m.geometry_dmin), clearance_min=_nan_inf(m.geometry_clear))
+                   d_min=finite_or_nan(m.geometry_dmin), clearance_min=finite_or_nan(m.geometry_clear))
 
 
-def _nan_inf(values: list) -> np.ndarray:
+def finite_or_nan(values: list) -> np.ndarray:
+    """Distances as an array, with nan where none was observed (inf)."""
     arr = np.asarray(values, dtype=float)
     return np.where(np.isfinite(arr), arr, np.nan)
 

@@ -178,7 +178,7 @@ class Presence:
             else:
                 self._alive = self._alive - {rid}
                 self.left[rid] += 1
-                log.warning("robot %d left the swarm (liveliness token dropped)", rid)
+                log.info("robot %d left the swarm (liveliness token dropped)", rid)
 
     def alive(self) -> frozenset[int]:
         return self._alive

@@ -1,0 +1,257 @@
+"""The one-command SITL swarm: router, plant, one agent process per robot, recording.
+
+Sequence: open the Zenoh router in this process (loopback endpoint, scouting off) and start
+recording; write each robot's agent config and the run manifest; start the plant process(es)
+(emulated drivers on one CAN bus per robot, robot motion, truth and obstacle detections) and
+wait for truth from every robot; start the agents and wait for every liveliness token;
+publish the mission with an epoch a little in the future; watch the run (progress, live
+status table, lost processes); then end every child (agents first: zero velocity, IDLE) and
+turn the recording into the same run folder as ``sim``, plus loop timing, neighbour-state age
+and watchdog trips.
+
+A plant that dies ends the run at once; an agent that dies is reported and the run goes on
+(its robot stands still, its drivers' watchdog stopped it), so what the others do is
+measured. Any failure or Ctrl-C tears down every process.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.live import Live
+from rich.table import Table
+
+from agent.settings import AgentSettings, CanSettings, ZenohSettings, settings_to_toml
+from hil.processes import Children, wait_until
+from hil.recorder import Recorder
+from hil.scenario import Scenario
+from transport.payloads import MissionMsg, StateFlags, StateMsg, TruthMsg
+from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
+
+log = logging.getLogger(__name__)
+
+MODE_NAMES = {0: "TRACK", 1: "AVOID", 2: "ROTATE"}
+
+
+class SitlError(RuntimeError):
+    """The swarm could not be started or lost its plant."""
+
+
+@dataclass(frozen=True)
+class SitlOptions:
+    can_interface: str = "udp_multicast"
+    can_channel: str | None = None      # udp_multicast group, or socketcan template "vcan{i}"
+    can_base_port: int = 43200          # udp_multicast: robot ID's bus on port base + ID
+    robots_per_plant: int = 0           # 0: one plant process hosts every robot
+    zenoh_port: int | None = None       # router port on 127.0.0.1 (default: a free one)
+    startup_timeout: float = 40.0       # s
+    lead_time: float = 1.5              # s between the mission message and its epoch
+    live: bool = True                   # live status table on a terminal
+
+
+@dataclass
+class SitlRun:
+    """What the launcher saw, for the report and the exit code."""
+
+    epoch: float = 0.0
+    lost: dict = field(default_factory=dict)      # child name -> exit code
+    agent_stats: dict = field(default_factory=dict)
+    plant_stats: list = field(default_factory=list)
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _swarm_name(sc: Scenario) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in sc.name) or "swarm"
+
+
+def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
+                   opts: SitlOptions) -> AgentSettings:
+    rid = int(sc.ids[index])
+    if opts.can_interface == "udp_multicast":
+        can = CanSettings(interface="udp_multicast", channel=opts.can_channel or "ff11::b5:1",
+                          port=opts.can_base_port + rid)
+    else:
+        can = CanSettings(interface=opts.can_interface,
+                          channel=(opts.can_channel or "vcan{i}").format(i=index, id=rid))
+    return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=tuple(map(float, sc.poses[index])),
+                         control=sc.control, robot=sc.robot, can=can,
+                         zenoh=ZenohSettings(mode="client", connect=(endpoint,)),
+                         autostart=True, sensing_range=sc.sensing_range)
+
+
+def _status_table(sc: Scenario, states: dict, truth: dict, presence: frozenset,
+                  t: float) -> Table:
+    table = Table(title=f"{sc.name}: t = {t:5.1f} s of {sc.duration:g} s", header_style="bold")
+    for col in ("robot", "alive", "mode", "flags", "x [m]", "y [m]", "error [m]", "v [m/s]"):
+        table.add_column(col, justify="right")
+    for rid in sc.ids:
+        st, tr = states.get(int(rid)), truth.get(int(rid))
+        if st is None or tr is None:
+            table.add_row(str(rid), "yes" if rid in presence else "no", "-", "-", "-", "-",
+                          "-", "-")
+            continue
+        s, p = st.msg, tr.msg
+        flags = ",".join(f.name for f in StateFlags if s.flags & f) or "-"
+        err = float(np.hypot(p.x - s.x_d, p.y - s.y_d))
+        table.add_row(str(rid), "yes" if rid in presence else "[red]LOST[/red]",
+                      MODE_NAMES.get(s.mode, str(s.mode)), flags, f"{p.x:7.2f}", f"{p.y:7.2f}",
+                      f"{err:6.2f}", f"{p.v:6.2f}")
+    return table
+
+
+def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> SitlRun:
+    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen."""
+    out.mkdir(parents=True, exist_ok=True)
+    run = SitlRun()
+    swarm = _swarm_name(sc)
+    keys = Keys(swarm)
+    port = opts.zenoh_port or free_tcp_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    router = open_session(session_config("router", listen=[endpoint]), "the SITL router")
+    opened = []
+    try:
+        recorder = Recorder(router, keys, out / "run.mcap")
+        opened.append(recorder)
+        presence = Presence(router, keys)
+        opened.append(presence)
+        truth = Latest(router, keys.truth("*"), TruthMsg.decode, time.time)
+        states = Latest(router, keys.state("*"), StateMsg.decode, time.time)
+        opened += [truth, states]
+        config_dir = out / "config"
+        config_dir.mkdir(exist_ok=True)
+        settings = [agent_settings(sc, i, swarm, endpoint, opts) for i in range(len(sc.ids))]
+        for s in settings:
+            (config_dir / f"robot_{s.robot_id}.toml").write_text(settings_to_toml(s))
+        _write_manifest(out, sc, settings, endpoint, swarm)
+
+        with Children(out / "logs") as children:
+            _start_plants(children, sc, opts, swarm, endpoint, out)
+            ids = {int(i) for i in sc.ids}
+            console.print(f"plant starting ({len(ids)} robots) ...")
+            if not wait_until(lambda: set(truth.snapshot()) >= ids or children.failed(),
+                              opts.startup_timeout) or children.failed():
+                raise SitlError(_failure("the plant did not come up", children))
+            agents = {}
+            for s in settings:
+                agents[s.robot_id] = children.start(
+                    f"agent_{s.robot_id}",
+                    ["agent", "--config", str(config_dir / f"robot_{s.robot_id}.toml"),
+                     "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")])
+            console.print(f"{len(agents)} agents starting ...")
+            if not wait_until(lambda: presence.alive() >= ids or children.failed(),
+                              opts.startup_timeout) or children.failed():
+                raise SitlError(_failure("not every agent came up", children))
+
+            run.epoch = time.time() + opts.lead_time
+            mission = MissionMsg(1, time.time(), run.epoch, sc.formation.center0,
+                                 sc.formation.velocity, sc.formation.omega, sc.ids,
+                                 sc.formation.offsets)
+            router.put(keys.mission, mission.encode())
+            console.print(f"mission published; t = 0 at epoch {run.epoch:.3f}")
+            _watch(sc, run, children, router, keys, mission, truth, states, presence,
+                   opts, console)
+            # clean stop: agents first (zero velocity, IDLE), then the plants
+            for name, child in agents.items():
+                if child.proc.poll() is None:
+                    children.terminate(child)
+            children.terminate_all()
+        for s in settings:
+            path = out / "logs" / f"agent_{s.robot_id}.json"
+            if path.exists():
+                run.agent_stats[s.robot_id] = json.loads(path.read_text())
+        for path in sorted((out / "logs").glob("plant_*.json")):
+            run.plant_stats.append(json.loads(path.read_text()))
+        return run
+    finally:
+        for thing in reversed(opened):
+            thing.close()
+        router.close()
+
+
+def _failure(what: str, children: Children) -> str:
+    lines = [what + "."]
+    for c in children.failed():
+        lines.append(f"{c.name} (pid {c.pid}) exited with {c.proc.returncode}; "
+                     f"last lines of {c.log_path}:\n{c.tail()}")
+    return "\n".join(lines)
+
+
+def _start_plants(children: Children, sc: Scenario, opts: SitlOptions, swarm: str,
+                  endpoint: str, out: Path) -> None:
+    ids = [int(i) for i in sc.ids]
+    size = opts.robots_per_plant or len(ids)
+    for k in range(0, len(ids), size):
+        group = ids[k:k + size]
+        args = ["plant", "--scenario", str(sc.source), "--robots", ",".join(map(str, group)),
+                "--swarm", swarm, "--zenoh-connect", endpoint,
+                "--can-interface", opts.can_interface,
+                "--stats", str(out / "logs" / f"plant_{k // size}.json")]
+        if opts.can_interface == "udp_multicast":
+            args += ["--can-channel", opts.can_channel or "ff11::b5:1",
+                     "--can-base-port", str(opts.can_base_port)]
+        elif opts.can_channel:
+            args += ["--can-channel", opts.can_channel]
+        children.start(f"plant_{k // size}", args)
+
+
+def _write_manifest(out: Path, sc: Scenario, settings: list[AgentSettings], endpoint: str,
+                    swarm: str) -> None:
+    robots = {str(s.robot_id): {"can": {"interface": s.can.interface, "channel": s.can.channel,
+                                        "port": s.can.port, "left_node": s.can.left_node,
+                                        "right_node": s.can.right_node},
+                                "zenoh": endpoint, "mavlink": {"sysid": s.robot_id},
+                                "config": f"config/robot_{s.robot_id}.toml"}
+              for s in settings}
+    (out / "manifest.json").write_text(json.dumps(
+        {"version": 1, "scenario": sc.name, "swarm": swarm, "zenoh_router": endpoint,
+         "robots": robots}, indent=2) + "\n")
+
+
+def _watch(sc: Scenario, run: SitlRun, children: Children, router, keys: Keys,
+           mission: MissionMsg, truth: Latest, states: Latest, presence: Presence,
+           opts: SitlOptions, console: Console) -> None:
+    end = run.epoch + sc.duration
+    live = Live(console=console, auto_refresh=False, transient=True) \
+        if opts.live and console.is_terminal else None
+    last_mission = time.monotonic()
+    last_note = 0.0
+    if live:
+        live.start()
+    try:
+        while time.time() < end:
+            time.sleep(0.1)
+            for child in children.failed():
+                if child.name in run.lost:
+                    continue
+                run.lost[child.name] = child.proc.returncode
+                child.expected_exit = True
+                console.print(f"[red]{child.name} (pid {child.pid}) exited with "
+                              f"{child.proc.returncode}[/red]")
+                if child.name.startswith("plant"):
+                    raise SitlError(_failure("the plant died", children)
+                                    + f"\n{child.tail()}")
+            if time.monotonic() - last_mission > 1.0:        # for late or lossy joiners
+                router.put(keys.mission, mission.encode())
+                last_mission = time.monotonic()
+            t = time.time() - run.epoch
+            if live:
+                live.update(_status_table(sc, states.snapshot(), truth.snapshot(),
+                                          presence.alive(), t), refresh=True)
+            elif time.monotonic() - last_note > 5.0:
+                last_note = time.monotonic()
+                console.print(f"t = {t:5.1f} s of {sc.duration:g} s, "
+                              f"{len(presence.alive())}/{len(sc.ids)} agents alive")
+    finally:
+        if live:
+            live.stop()

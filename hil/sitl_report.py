@@ -1,0 +1,96 @@
+"""Turn a SITL recording (MCAP) into the run data and metrics that ``sim`` produces.
+
+Ground truth (``truth`` messages from the plant) gives the robots' poses; the agents' own
+``state`` messages give the commanded (v, u), the mode and the reference they used. Both are
+resampled on the control period from the mission epoch (latest message at or before each
+instant). Distances and collisions are checked at every truth sample, tracking and
+convergence at every control period, with the same :class:`RunMetrics` as the batch
+simulator.
+"""
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from firmware_sim.metrics import RunMetrics, tolerance
+from firmware_sim.world import Obstacles
+from hil.recorder import read_messages
+from hil.run_folder import RunData, finite_or_nan
+from hil.scenario import Scenario
+
+
+class RecordingError(ValueError):
+    """The recording lacks what a report needs (mission, truth or states of a robot)."""
+
+
+def _series(rows: list[tuple[float, list[float]]]) -> tuple[np.ndarray, np.ndarray]:
+    rows.sort(key=lambda r: r[0])
+    return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+
+
+def _at(times: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Latest value at or before each t (the first one before the first sample)."""
+    idx = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1)
+    return values[idx]
+
+
+def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, dict]:
+    """(run data on the control period, metrics, extras such as the epoch) of a recording."""
+    truth, states = defaultdict(list), defaultdict(list)
+    epoch = None
+    for _topic, kind, _log_t, msg in read_messages(path):
+        if kind == "mission" and epoch is None:
+            epoch = msg["epoch"]
+        elif kind == "truth":
+            truth[msg["robot_id"]].append((msg["stamp"], [msg["x"], msg["y"], msg["theta"],
+                                                          msg["v"], msg["u"]]))
+        elif kind == "state":
+            states[msg["robot_id"]].append((msg["stamp"], [msg["v"], msg["u"], msg["mode"],
+                                                           msg["x_d"], msg["y_d"]]))
+    if epoch is None:
+        raise RecordingError(f"{path}: no mission message; was the mission started?")
+    missing = [int(i) for i in sc.ids if not truth.get(int(i)) or not states.get(int(i))]
+    if missing:
+        raise RecordingError(f"{path}: no truth or no state messages for robot(s) {missing}")
+
+    T = sc.control.period
+    t = np.arange(int(round(sc.duration / T)) + 1) * T
+    n = len(sc.ids)
+    pose = np.zeros((len(t), n, 3))
+    v, u = np.zeros((len(t), n)), np.zeros((len(t), n))
+    mode = np.zeros((len(t), n), dtype=int)
+    truth_t = []
+    truth_series = {}
+    for j, rid in enumerate(sc.ids):
+        tt, tv = _series(truth[int(rid)])
+        st, sv = _series(states[int(rid)])
+        truth_series[j] = (tt - epoch, tv)
+        truth_t.append(tt - epoch)
+        pose[:, j] = _at(tt - epoch, tv, t)[:, :3]
+        s = _at(st - epoch, sv, t)
+        v[:, j], u[:, j], mode[:, j] = s[:, 0], s[:, 1], s[:, 2].astype(int)
+    ref = np.stack([sc.formation.reference(tk)[0] for tk in t])
+    ref_vel = np.stack([sc.formation.reference(tk)[1] for tk in t])
+
+    metrics = RunMetrics(ids=sc.ids, a=sc.control.a)
+    # geometry at every truth sample of any robot, all pairs, all obstacles
+    samples = np.unique(np.concatenate(truth_t))
+    samples = samples[(samples >= 0.0) & (samples <= sc.duration)]
+    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)], dtype=int
+                     ).reshape(-1, 2)
+    obstacles: Obstacles = sc.obstacles
+    robots = np.arange(n)
+    for ts in samples:
+        pos = np.stack([_at(*truth_series[j], np.array([ts]))[0, :2] for j in range(n)])
+        metrics.observe_geometry(float(ts), pos, pairs, robots, obstacles.clearance(pos))
+    for k, tk in enumerate(t):
+        err = np.hypot(*(pose[k, :, :2] - ref[k]).T)
+        metrics.observe_control(float(tk), err, tolerance(ref_vel[k], sc.control.K), v[k],
+                                u[k], mode[k])
+    data = RunData(ids=sc.ids, t=t, pose=pose, v=v, u=u, mode=mode, ref=ref,
+                   dist_t=np.asarray(metrics.geometry_t),
+                   d_min=finite_or_nan(metrics.geometry_dmin),
+                   clearance_min=finite_or_nan(metrics.geometry_clear))
+    return data, metrics, {"epoch": epoch}
