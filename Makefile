@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean system-packages
+.PHONY: demo sim test bench clean system-packages
 
 # Debian packages for the tests of the real socketcan path (User-Mode Linux guest with vcan)
 # and candump; installed when missing if we are root with apt-get, otherwise those tests skip
@@ -27,7 +27,10 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/boundswarm sim scenarios/paper.toml --out runs/paper
+	$(BIN)/boundswarm sitl scenarios/paper.toml --out runs/paper
+
+sim: $(STAMP)
+	$(BIN)/boundswarm sim scenarios/paper.toml --out runs/paper-sim
 
 test: $(STAMP) system-packages
 	$(BIN)/python -m pytest

@@ -148,6 +148,8 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                     f"agent_{s.robot_id}",
                     ["agent", "--config", str(config_dir / f"robot_{s.robot_id}.toml"),
                      "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")])
+            _write_manifest(out, sc, settings, endpoint, swarm,
+                            {c.name: c.pid for c in children.children})
             console.print(f"{len(agents)} agents starting ...")
             if not wait_until(lambda: presence.alive() >= ids or children.failed(),
                               opts.startup_timeout) or children.failed():
@@ -206,16 +208,22 @@ def _start_plants(children: Children, sc: Scenario, opts: SitlOptions, swarm: st
 
 
 def _write_manifest(out: Path, sc: Scenario, settings: list[AgentSettings], endpoint: str,
-                    swarm: str) -> None:
+                    swarm: str, pids: dict[str, int] | None = None) -> None:
+    """The run manifest: how to attach to each robot (CAN bus, Zenoh, MAVLink, process)."""
+    pids = pids or {}
     robots = {str(s.robot_id): {"can": {"interface": s.can.interface, "channel": s.can.channel,
                                         "port": s.can.port, "left_node": s.can.left_node,
                                         "right_node": s.can.right_node},
                                 "zenoh": endpoint, "mavlink": {"sysid": s.robot_id},
-                                "config": f"config/robot_{s.robot_id}.toml"}
+                                "config": f"config/robot_{s.robot_id}.toml",
+                                "pid": pids.get(f"agent_{s.robot_id}")}
               for s in settings}
-    (out / "manifest.json").write_text(json.dumps(
+    tmp = out / "manifest.json.tmp"
+    tmp.write_text(json.dumps(
         {"version": 1, "scenario": sc.name, "swarm": swarm, "zenoh_router": endpoint,
+         "plants": {k: v for k, v in pids.items() if k.startswith("plant")},
          "robots": robots}, indent=2) + "\n")
+    tmp.replace(out / "manifest.json")
 
 
 def _watch(sc: Scenario, run: SitlRun, children: Children, router, keys: Keys,

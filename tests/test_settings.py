@@ -1,0 +1,44 @@
+import pytest
+
+from agent.config import ConfigError
+from agent.settings import (AgentSettings, CanSettings, load_settings, parse_settings,
+                            settings_to_toml)
+
+BASE = {"robot_id": 3, "swarm": "demo", "initial_pose": [1.0, 2.0, 0.5]}
+
+
+def test_round_trip_through_toml(tmp_path):
+    s = AgentSettings(robot_id=7, swarm="s", initial_pose=(1.0, -2.0, 3.0), autostart=True,
+                      can=CanSettings(interface="socketcan", channel="can0"))
+    path = tmp_path / "robot.toml"
+    path.write_text(settings_to_toml(s))
+    assert load_settings(path) == s
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"robot_id": 0}, "robot_id"),
+    ({"robot_id": "3"}, "robot_id"),
+    ({"swarm": "a/b"}, "swarm"),
+    ({"initial_pose": [0.0, 1.0]}, "initial_pose"),
+    ({"autostart": "yes"}, "autostart"),
+    ({"can": {"left_node": 1, "right_node": 1}}, r"\[can\] right_node"),
+    ({"can": {"port": 70000}}, r"\[can\] port"),
+    ({"can": {"speed": 1}}, r"\[can\]: unknown"),
+    ({"zenoh": {"mode": "router"}}, r"\[zenoh\] mode"),
+    ({"zenoh": {"connect": []}}, r"\[zenoh\] connect"),
+    ({"timeouts": {"feedback": 0.01}}, r"\[timeouts\] feedback"),
+    ({"control": {"period": 0.1}}, r"\[control\]"),
+    ({"motors": {}}, "top level"),
+])
+def test_bad_fields_are_named(change, field):
+    doc = {**BASE, **change}
+    with pytest.raises(ConfigError, match=field) as exc:
+        parse_settings(doc, "robot.toml")
+    assert "robot.toml" in str(exc.value)
+
+
+def test_missing_required_fields():
+    for key in BASE:
+        doc = {k: v for k, v in BASE.items() if k != key}
+        with pytest.raises(ConfigError, match=f"{key}: missing"):
+            parse_settings(doc, "robot.toml")

@@ -1,0 +1,157 @@
+"""Multi-process SITL smoke tests: the launcher, plant and agent processes on loopback.
+
+Each test runs ``boundswarm sitl`` as a child process and, pass or fail, ends it and every
+process it started (by PID, from the run manifest).
+"""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from firmware_sim.batch import SimOptions, simulate
+from hil.run_folder import read_run
+from hil.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIOS = ROOT / "scenarios"
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:                                       # a zombie of ours is not running
+        done, _ = os.waitpid(pid, os.WNOHANG)
+        return done == 0
+    except ChildProcessError:
+        return True
+
+
+class Launcher:
+    def __init__(self, tmp_path: Path, scenario: str, *extra: str):
+        self.out = tmp_path / "run"
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "hil.cli", "sitl", str(SCENARIOS / scenario), "--out",
+             str(self.out), "--no-live", "--can-base-port", str(44000 + os.getpid() % 1000 * 10),
+             *extra], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+
+    def manifest(self) -> dict:
+        try:
+            return json.loads((self.out / "manifest.json").read_text())
+        except (OSError, ValueError):
+            return {}
+
+    def pids(self) -> list[int]:
+        m = self.manifest()
+        return [p for p in list(m.get("plants", {}).values())
+                + [r.get("pid") for r in m.get("robots", {}).values()] if p]
+
+    def wait(self, timeout: float) -> tuple[int, str]:
+        out, _ = self.proc.communicate(timeout=timeout)
+        return self.proc.returncode, out.decode(errors="replace")
+
+    def cleanup(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        for pid in self.pids():
+            if alive(pid):
+                os.kill(pid, signal.SIGKILL)
+        assert not [p for p in self.pids() if alive(p)], "processes left running"
+
+
+@pytest.fixture
+def launch(tmp_path):
+    started = []
+
+    def start(scenario, *extra):
+        started.append(Launcher(tmp_path, scenario, *extra))
+        return started[-1]
+    yield start
+    for launcher in started:
+        launcher.cleanup()
+
+
+def test_sitl_paper_scenario(launch):
+    sc = load_scenario(SCENARIOS / "paper.toml")
+    run = launch("paper.toml", "--duration", "12")
+    code, out = run.wait(timeout=150)
+    assert code == 0, out
+    m = json.loads((run.out / "metrics.json").read_text())
+    a = sc.control.a
+    assert m["converged"] and m["convergence_time"] <= 12.0, out
+    assert m["min_pair_distance"] > a and m["min_obstacle_clearance"] > a
+    assert m["collisions"] == 0
+    s = m["sitl"]
+    assert sum(s["watchdog_trips"].values()) == 0 and s["lost_processes"] == {}
+    assert s["agents_reporting"] == 9
+    assert s["deadline_misses"] <= 3, s["deadline_misses"]   # 0 expected; shared machine
+    # after convergence, each robot within 0.5 m of the batch simulation
+    data = read_run(run.out)
+    batch = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
+                     SimOptions(duration=12.0))
+    after = data.t >= m["convergence_time"]
+    k = np.searchsorted(batch.t, data.t[after])
+    gap = np.hypot(*(data.pose[after, :, :2] - batch.pose[k, :, :2]).transpose(2, 0, 1))
+    assert gap.max() < 0.5, gap.max()
+    # every process is gone, the run folder is complete
+    assert not [p for p in run.pids() if alive(p)]
+    for name in ("run.mcap", "trajectories.csv", "figures/xy.png", "config/robot_1.toml"):
+        assert (run.out / name).exists(), name
+
+
+def test_sigkill_of_an_agent_and_malformed_payloads(launch):
+    sc = load_scenario(SCENARIOS / "sitl_small.toml")
+    run = launch("sitl_small.toml")
+    deadline = time.monotonic() + 60
+    while not (run.manifest().get("robots", {}).get("2", {}).get("pid")
+               and (run.out / "run.mcap").exists()) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    manifest = run.manifest()
+    victim = manifest["robots"]["2"]["pid"]
+    # garbage on robot 1's state key, through the swarm's own router
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("connect/endpoints", json.dumps([manifest["zenoh_router"]]))
+    session = zenoh.open(conf)
+    try:
+        time.sleep(4.0)                          # agents up, mission started
+        for _ in range(5):
+            session.put(f"boundswarm/{manifest['swarm']}/robot/1/state", b"\x01\x01garbage")
+            time.sleep(0.05)
+        os.kill(victim, signal.SIGKILL)
+    finally:
+        session.close()
+    code, out = run.wait(timeout=90)
+    assert code == 3, out                        # a process was lost, the run was safe
+    assert "agent_2" in out and "exited with -9" in out
+    m = json.loads((run.out / "metrics.json").read_text())
+    assert m["collisions"] == 0 and m["min_pair_distance"] > sc.control.a
+    s = m["sitl"]
+    assert s["lost_processes"] == {"agent_2": -9}
+    assert s["watchdog_trips"]["2"] >= 1         # its drivers stopped on their own
+    assert s["watchdog_trips"]["1"] == 0 and s["watchdog_trips"]["3"] == 0
+    assert s["zenoh_dropped"]["3"].get("size", 0) >= 1   # counted, not used
+    assert not [p for p in run.pids() if alive(p)]
+
+
+def test_bad_agent_config_is_refused_naming_the_field(tmp_path):
+    bad = tmp_path / "agent.toml"
+    bad.write_text('robot_id = 300\nswarm = "x"\ninitial_pose = [0.0, 0.0, 0.0]\n')
+    proc = subprocess.run([sys.executable, "-m", "hil.cli", "agent", "--config", str(bad)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert str(bad) in proc.stderr and "robot_id" in proc.stderr
