@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import signal
+import time
 from pathlib import Path
 
 from agent.loop import FixedRateLoop, SystemClock
@@ -27,6 +28,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
     """Run one agent until a signal (or ``max_ticks``); returns its statistics."""
     s = settings
     clock = SystemClock()
+    t0 = time.monotonic()
     bus = open_bus(s.can.interface, s.can.channel, port=s.can.port, bitrate=s.can.bitrate)
     session = swarm = None
     try:
@@ -48,6 +50,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         finally:
             agent.shutdown()
         stats = {"robot_id": s.robot_id, "loop": loop.stats.summary(),
+                 "cpu_seconds": time.process_time(), "wall_seconds": time.monotonic() - t0,
                  "agent": agent.counters.summary(), "zenoh": swarm.counters(),
                  "can": {"sent": motor.sent, "ignored": dict(motor.ignored)},
                  "failsafe": agent.failsafe}

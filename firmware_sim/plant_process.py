@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import signal
+import time
 from typing import Callable
 
 import numpy as np
@@ -57,6 +58,7 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
                    dt: float = 0.005, watchdog: float = 0.1) -> dict:
     """Host robots ``robot_ids`` of ``scenario`` until a signal; returns loop statistics."""
     clock = SystemClock()
+    t0 = time.monotonic()
     keys = Keys(swarm)
     session = open_session(session_config("client", connect=connect), "the plant")
     robots: list[PlantRobot] = []
@@ -85,6 +87,8 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
 
         loop.run(tick)
         stats = loop.stats.summary()
+        stats["cpu_seconds"] = time.process_time()
+        stats["wall_seconds"] = time.monotonic() - t0
         stats["watchdog_trips"] = {rb.robot_id: sum(a.watchdog_trips
                                                      for a in rb.drivers.axes.values())
                                    for rb in robots}

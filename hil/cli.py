@@ -105,6 +105,10 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
         "watchdog_trips": {k: v for p in run.plant_stats
                            for k, v in p.get("watchdog_trips", {}).items()},
         "plant_overruns": sum(p["overruns"] for p in run.plant_stats),
+        "cpu_share": {**{f"agent_{r}": round(st["cpu_seconds"] / st["wall_seconds"], 3)
+                         for r, st in run.agent_stats.items()},
+                      **{f"plant_{k}": round(p["cpu_seconds"] / p["wall_seconds"], 3)
+                         for k, p in enumerate(run.plant_stats)}},
     }
     run_folder.write_run(out, metrics, data, sc.source.read_text() if sc.source else None)
     draw_figures(data, sc.obstacles, sc.control.a, sc.control.b, out / run_folder.FIGURES)
