@@ -8,9 +8,10 @@ Key space (prefix ``boundswarm/<swarm>``)::
     robot/<id>/truth       ground truth pose, SITL only (TruthMsg)
     mission                formation and epoch (MissionMsg)
 
-Receiving never blocks the control loop: subscriber callbacks (zenoh's threads) decode the
-payload and swap in a new dictionary; the loop reads :meth:`Latest.snapshot`, a mapping that
-is never mutated after it is published. Malformed payloads are dropped and counted.
+Receiving never blocks the control loop: samples wait in bounded rings filled by zenoh's
+own threads; the loop drains them without blocking and reads :meth:`Latest.snapshot`, a
+mapping that is never mutated after it is returned. Malformed payloads are dropped and
+counted.
 """
 from __future__ import annotations
 
@@ -107,50 +108,59 @@ class Keys:
 class Latest(Generic[M]):
     """Latest valid message per robot id on a key expression, with counters.
 
-    ``decode(bytes) -> msg`` raises PayloadError for a payload to drop; ``ignore`` lists
-    robot ids not to keep (the agent's own state). Counters: ``received``, ``accepted``,
-    ``dropped`` by reason (PayloadError reasons, and ``out_of_order``: older than the held one).
+    Samples wait in a bounded ring (zenoh's RingChannel: the oldest is dropped when full,
+    zenoh's threads never block and no Python callback competes with the loop for the GIL);
+    :meth:`snapshot` drains it, decodes, and returns a mapping that is never mutated
+    afterwards. ``decode(bytes) -> msg`` raises PayloadError for a payload to drop;
+    ``ignore`` lists robot ids not to keep (the agent's own state). Counters: ``received``,
+    ``accepted``, ``dropped`` by reason (PayloadError reasons, and ``out_of_order``: older
+    than the held one).
     """
 
     def __init__(self, session: zenoh.Session, key: str, decode: Callable[[bytes], M],
-                 clock: Callable[[], float], ignore: Iterable[int] = ()):
+                 clock: Callable[[], float], ignore: Iterable[int] = (), capacity: int = 256):
         self._decode, self._clock, self._ignore = decode, clock, frozenset(ignore)
         self._lock = threading.Lock()
         self._latest: Mapping[int, Received[M]] = MappingProxyType({})
         self.received = 0
         self.accepted = 0
         self.dropped: Counter = Counter()
-        self._sub = session.declare_subscriber(key, self._on_sample)
+        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(capacity))
 
-    def _on_sample(self, sample: zenoh.Sample) -> None:
+    def _drain(self) -> None:
+        latest = None
         now = self._clock()
-        data = sample.payload.to_bytes()
-        with self._lock:
+        while (sample := self._sub.try_recv()) is not None:
             self.received += 1
             try:
-                msg = self._decode(data)
+                msg = self._decode(sample.payload.to_bytes())
             except PayloadError as exc:
                 self.dropped[exc.reason] += 1
                 log.debug("dropped payload on %s: %s", sample.key_expr, exc)
-                return
+                continue
             rid = getattr(msg, "robot_id", 0)
             if rid in self._ignore:
-                return
-            held = self._latest.get(rid)
+                continue
+            if latest is None:
+                latest = dict(self._latest)
+            held = latest.get(rid)
             if held is not None and getattr(msg, "stamp", 0.0) < getattr(held.msg, "stamp", 0.0):
                 self.dropped["out_of_order"] += 1
-                return
+                continue
             self.accepted += 1
-            latest = dict(self._latest)
             latest[rid] = Received(msg, now)
+        if latest is not None:
             self._latest = MappingProxyType(latest)
 
     def snapshot(self) -> Mapping[int, Received[M]]:
-        """The latest message of each robot id; never mutated afterwards."""
-        return self._latest
+        """The latest message of each robot id (after taking in what has arrived)."""
+        with self._lock:
+            self._drain()
+            return self._latest
 
     def counters(self) -> dict:
         with self._lock:
+            self._drain()
             return {"received": self.received, "accepted": self.accepted,
                     "dropped": dict(self.dropped)}
 
