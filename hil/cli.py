@@ -243,6 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
     plant.add_argument("--stats", help="write loop statistics (JSON) at exit")
     plant.set_defaults(func=cmd_plant)
 
+    from hil import can_cli
+    can_cli.add_parser(sub, add_can_options)
+
     report = sub.add_parser("report", help="figures and metrics from a recorded run")
     report.add_argument("run", help="run folder written by sim or sitl")
     report.set_defaults(func=cmd_report)

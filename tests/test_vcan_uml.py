@@ -52,3 +52,39 @@ def test_host_and_drivers_over_vcan0_decoded_from_a_candump_capture():
     assert "ERRORS right: WATCHDOG_TIMER_EXPIRED,left: WATCHDOG_TIMER_EXPIRED" in r.output
     assert "Input_Vel: 2.0 rev/s" in r.output
     assert "Axis_Error: WATCHDOG_TIMER_EXPIRED" in r.output
+
+
+STATS_SCRIPT = r"""
+.venv/bin/python -m hil.cli plant --drivers-only --can-interface socketcan --can-channel vcan0 \
+    > $UML_WORK/drivers.log 2>&1 &
+DRIVERS=$!
+.venv/bin/python - > $UML_WORK/host.log 2>&1 <<'PY' &
+import time
+from transport.canbus import open_bus
+from transport.wheel_drivers import WheelDrivers
+host = WheelDrivers(open_bus("socketcan", "vcan0"))
+while host.feedback() is None:
+    time.sleep(0.01)
+host.arm()
+t0 = time.monotonic()
+while time.monotonic() - t0 < 4.0:
+    host.command(1.0, 1.0)
+    time.sleep(0.02)
+PY
+HOST=$!
+sleep 2
+.venv/bin/python -m hil.cli can stats --duration 1.0 --json --can-interface socketcan \
+    --can-channel vcan0
+kill $HOST $DRIVERS
+"""
+
+
+def test_can_stats_on_vcan0():
+    import json
+    r = uml.run_script(STATS_SCRIPT, cwd=ROOT, timeout=150)
+    assert r.returncode == 0, r.output + r.console[-1500:]
+    doc = json.loads(r.output[r.output.index("{"):r.output.rindex("}") + 1])
+    rates = {(m["name"], m["node"]): m["rate_hz"] for m in doc["messages"]}
+    assert rates[("Get_Encoder_Estimates", 0)] == pytest.approx(100, rel=0.25)
+    assert rates[("Set_Input_Vel", 1)] == pytest.approx(50, rel=0.3)
+    assert 0.04 < doc["bus_load"] < 0.12

@@ -130,6 +130,11 @@ def decode(msg: can.Message) -> Frame:
     return Frame(node, cmd, signals)
 
 
+def message_name(cmd: Cmd) -> str:
+    """The DBC's name of a message without its node prefix, e.g. ``Get_Encoder_Estimates``."""
+    return _layout(cmd).name.split("_", 1)[1]
+
+
 def cycle_time(cmd: Cmd) -> float | None:
     """The DBC cycle time [s] of a cyclic message, or None."""
     ms = _layout(cmd).cycle_time
