@@ -96,6 +96,10 @@ def _header(data: bytes, kind: PayloadKind) -> Header:
     return Header(kind, robot_id, seq, stamp)
 
 
+def _pack_header(kind: PayloadKind, robot_id: int, seq: int, stamp: float) -> bytes:
+    return HEADER.pack(VERSION, kind, robot_id, seq & 0xFFFFFFFF, stamp)
+
+
 def _finite(values, what: str) -> None:
     if not all(math.isfinite(v) for v in values):
         raise PayloadError("nonfinite", what)
@@ -126,8 +130,7 @@ class StateMsg:
     SIZE = HEADER.size + STATE_BODY.size
 
     def encode(self) -> bytes:
-        return (HEADER.pack(VERSION, PayloadKind.STATE, self.robot_id, self.seq & 0xFFFFFFFF,
-                            self.stamp)
+        return (_pack_header(PayloadKind.STATE, self.robot_id, self.seq, self.stamp)
                 + STATE_BODY.pack(self.x, self.y, self.theta, self.v, self.u, self.x_d,
                                   self.y_d, self.mode, int(self.flags)))
 
@@ -158,8 +161,8 @@ class ObstaclesMsg:
     def encode(self) -> bytes:
         k = len(self.radii)
         body = np.column_stack([self.centers, self.radii]).astype("<f4").tobytes() if k else b""
-        return (HEADER.pack(VERSION, PayloadKind.OBSTACLES, self.robot_id,
-                            self.seq & 0xFFFFFFFF, self.stamp) + COUNT.pack(k) + body)
+        return (_pack_header(PayloadKind.OBSTACLES, self.robot_id, self.seq, self.stamp)
+                + COUNT.pack(k) + body)
 
     @classmethod
     def decode(cls, data: bytes) -> "ObstaclesMsg":
@@ -193,8 +196,7 @@ class TruthMsg:
     SIZE = HEADER.size + TRUTH_BODY.size
 
     def encode(self) -> bytes:
-        return (HEADER.pack(VERSION, PayloadKind.TRUTH, self.robot_id, self.seq & 0xFFFFFFFF,
-                            self.stamp)
+        return (_pack_header(PayloadKind.TRUTH, self.robot_id, self.seq, self.stamp)
                 + TRUTH_BODY.pack(self.x, self.y, self.theta, self.v, self.u))
 
     @classmethod
@@ -223,7 +225,7 @@ class MissionMsg:
         n = len(self.ids)
         members = b"".join(MEMBER.pack(int(i), float(o[0]), float(o[1]))
                            for i, o in zip(self.ids, self.offsets))
-        return (HEADER.pack(VERSION, PayloadKind.MISSION, 0, self.seq & 0xFFFFFFFF, self.stamp)
+        return (_pack_header(PayloadKind.MISSION, 0, self.seq, self.stamp)
                 + MISSION_BODY.pack(self.epoch, *self.center0, *self.velocity, self.omega, n)
                 + members)
 
