@@ -16,9 +16,11 @@ from pathlib import Path
 from agent.loop import FixedRateLoop, SystemClock
 from agent.node import Agent, AgentMode
 from agent.settings import AgentSettings
+from agent.systemd import Notifier
 from transport.canbus import open_bus
 from transport.wheel_drivers import WheelDrivers
-from transport.zenoh_link import Keys, SwarmLink, open_session, session_config
+from transport.zenoh_link import (Keys, SwarmLink, config_from_file, open_session,
+                                  session_config)
 
 log = logging.getLogger(__name__)
 
@@ -34,8 +36,9 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
     try:
         motor = WheelDrivers(bus, s.can.left_node, s.can.right_node,
                              vel_limit=s.robot.wheel_speed_limit, clock=clock.monotonic)
-        session = open_session(session_config(s.zenoh.mode, s.zenoh.listen, s.zenoh.connect),
-                               f"agent {s.robot_id}")
+        conf = (config_from_file(s.zenoh.config) if s.zenoh.config else
+                session_config(s.zenoh.mode, s.zenoh.listen, s.zenoh.connect))
+        session = open_session(conf, f"agent {s.robot_id}")
         swarm = SwarmLink(session, Keys(s.swarm), s.robot_id, clock.wall)
         agent = Agent(s, motor, swarm, clock)
         loop = FixedRateLoop(s.control.period, clock)
@@ -45,9 +48,22 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
             agent.arm()
             agent.set_mode(AgentMode.FORMATION)
         log.info("agent %d running at %g Hz", s.robot_id, 1.0 / s.control.period)
+        notifier = Notifier()
+        overruns = [0]
+
+        def tick(k: int, deadline: float) -> None:
+            agent.tick(k, deadline)
+            fb = agent.last_feedback
+            if fb is not None and fb.closed_loop and agent.failsafe is None:
+                notifier.ready(f"robot {s.robot_id} armed")
+            on_time = loop.stats.overruns == overruns[0]
+            overruns[0] = loop.stats.overruns
+            notifier.watchdog(clock.monotonic(), on_time and agent.failsafe is None)
+
         try:
-            loop.run(agent.tick, max_ticks=max_ticks)
+            loop.run(tick, max_ticks=max_ticks)
         finally:
+            notifier.stopping()
             agent.shutdown()
         stats = {"robot_id": s.robot_id, "loop": loop.stats.summary(),
                  "cpu_seconds": time.process_time(), "wall_seconds": time.monotonic() - t0,

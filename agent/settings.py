@@ -45,6 +45,8 @@ class ZenohSettings:
     mode: str = "client"
     connect: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     listen: tuple[str, ...] = ()
+    config: str | None = None        # a Zenoh JSON5 config file (TLS...); relative to the
+                                     # agent config's folder; replaces mode/connect/listen
 
 
 @dataclass(frozen=True)
@@ -84,14 +86,16 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
         raise rd.fail("[can] right_node", f"must differ from left_node ({can.left_node})")
 
     z = rd.table(doc, "zenoh")
-    rd.only(z, {"mode", "connect", "listen"}, "[zenoh]")
+    rd.only(z, {"mode", "connect", "listen", "config"}, "[zenoh]")
     zenoh = ZenohSettings(mode=rd.string(z, "mode", "[zenoh] mode", "client"),
                           connect=rd.strings(z, "connect", "[zenoh] connect",
                                              ZenohSettings.connect),
-                          listen=rd.strings(z, "listen", "[zenoh] listen"))
+                          listen=rd.strings(z, "listen", "[zenoh] listen"),
+                          config=rd.string(z, "config", "[zenoh] config")
+                          if "config" in z else None)
     if zenoh.mode not in ("client", "peer"):
         raise rd.fail("[zenoh] mode", f"expected client or peer, got {zenoh.mode!r}")
-    if zenoh.mode == "client" and not zenoh.connect:
+    if zenoh.mode == "client" and not zenoh.connect and zenoh.config is None:
         raise rd.fail("[zenoh] connect", "a client needs at least one router endpoint")
 
     t = rd.table(doc, "timeouts")
@@ -119,8 +123,15 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
 
 
 def load_settings(path: str | Path) -> AgentSettings:
+    """Read a config file; a relative ``[zenoh] config`` is taken from the file's folder."""
     path = Path(path)
-    return parse_settings(load_toml(path, "agent config"), str(path))
+    s = parse_settings(load_toml(path, "agent config"), str(path))
+    if s.zenoh.config is not None:
+        zpath = path.parent / s.zenoh.config
+        if not zpath.is_file():
+            raise TableReader(str(path)).fail("[zenoh] config", f"no such file {zpath}")
+        s = dataclasses.replace(s, zenoh=dataclasses.replace(s.zenoh, config=str(zpath)))
+    return s
 
 
 
@@ -141,7 +152,7 @@ def settings_to_toml(s: AgentSettings) -> str:
              f"autostart = {_toml_value(s.autostart)}"]
     tables = {"control": dataclasses.asdict(s.control), "robot": dataclasses.asdict(s.robot),
               "can": {k: v for k, v in dataclasses.asdict(s.can).items() if v is not None},
-              "zenoh": dataclasses.asdict(s.zenoh),
+              "zenoh": {k: v for k, v in dataclasses.asdict(s.zenoh).items() if v is not None},
               "timeouts": {"feedback": s.feedback_timeout, "staleness": s.staleness},
               "sensing": {"range": s.sensing_range}}
     for name, table in tables.items():

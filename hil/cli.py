@@ -123,6 +123,66 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     return EXIT_LOST if run.lost else EXIT_OK
 
 
+def cmd_deploy(args: argparse.Namespace, console: Console) -> int:
+    """Bundles for robot computers and the ground station."""
+    from hil.deploy import deploy, load_manifest
+    manifest = load_manifest(args.manifest)
+    bundles = deploy(manifest, Path(args.out))
+    for name, path in bundles.items():
+        console.print(f"{name}: {path}")
+    console.print("copy each robot-<id> folder to its robot and run its install.sh as root; "
+                  "see ground/README.md for the ground station")
+    return EXIT_OK
+
+
+def cmd_router(args: argparse.Namespace, console: Console) -> int:
+    """A Zenoh router (the ground station's), until Ctrl-C."""
+    import signal
+    import threading
+    from transport.zenoh_link import config_from_file, open_session
+    session = open_session(config_from_file(args.config), "the router")
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    console.print(f"router running ({args.config}); Ctrl-C stops")
+    try:
+        stop.wait()
+    finally:
+        session.close()
+    return EXIT_OK
+
+
+def cmd_mission(args: argparse.Namespace, console: Console) -> int:
+    """Publish the mission (formation and shared epoch) to a swarm."""
+    from transport.payloads import MissionMsg
+    from transport.zenoh_link import (Keys, Presence, config_from_file, open_session,
+                                      session_config)
+    from hil.processes import wait_until
+    sc = load_scenario(args.scenario)
+    conf = (config_from_file(args.config) if args.config
+            else session_config("client", connect=args.connect or []))
+    session = open_session(conf, "the mission publisher")
+    try:
+        keys = Keys(args.swarm)
+        presence = Presence(session, keys)
+        ids = {int(i) for i in sc.ids}
+        if not wait_until(lambda: presence.alive() >= ids, args.wait):
+            missing = sorted(ids - presence.alive())
+            raise ValueError(f"mission: robots {missing} are not alive after {args.wait:g} s")
+        epoch = time.time() + args.start_in
+        msg = MissionMsg(1, time.time(), epoch, sc.formation.center0, sc.formation.velocity,
+                         sc.formation.omega, sc.ids, sc.formation.offsets)
+        for _ in range(3):                       # late subscribers get it too
+            session.put(keys.mission, msg.encode())
+            time.sleep(0.2)
+        console.print(f"mission of {sc.name} published to {args.swarm}: t = 0 in "
+                      f"{args.start_in:g} s (epoch {epoch:.3f})")
+        presence.close()
+    finally:
+        session.close()
+    return EXIT_OK
+
+
 def cmd_report(args: argparse.Namespace, console: Console) -> int:
     """Redraw the figures of a saved run and show its metrics."""
     run = Path(args.run)
@@ -246,6 +306,25 @@ def build_parser() -> argparse.ArgumentParser:
     from hil import can_cli
     can_cli.add_parser(sub, add_can_options)
 
+    deploy = sub.add_parser("deploy", help="bundles for robot computers and the ground station")
+    deploy.add_argument("manifest", help="swarm manifest (TOML)")
+    deploy.add_argument("--out", required=True, help="folder for the bundles")
+    deploy.set_defaults(func=cmd_deploy)
+
+    router = sub.add_parser("router", help="run a Zenoh router from a config file")
+    router.add_argument("--config", required=True, help="zenoh config (JSON5)")
+    router.set_defaults(func=cmd_router)
+
+    mission = sub.add_parser("mission", help="publish a scenario's mission to a swarm")
+    mission.add_argument("--scenario", required=True)
+    mission.add_argument("--swarm", required=True)
+    mission.add_argument("--config", help="zenoh client config (JSON5), e.g. with TLS")
+    mission.add_argument("--connect", action="append", help="router endpoint (no config)")
+    mission.add_argument("--start-in", type=float, default=5.0, help="s until t = 0")
+    mission.add_argument("--wait", type=float, default=30.0,
+                         help="s to wait for every robot's liveliness token")
+    mission.set_defaults(func=cmd_mission)
+
     report = sub.add_parser("report", help="figures and metrics from a recorded run")
     report.add_argument("run", help="run folder written by sim or sitl")
     report.set_defaults(func=cmd_report)
@@ -260,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args, console)
     except (ScenarioError, ConfigError, run_folder.RunFolderError, ValueError,
-            BusOpenError, ConnectionError) as exc:
+            BusOpenError, ConnectionError, OSError) as exc:
         print(f"boundswarm {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -52,6 +52,16 @@ def session_config(mode: str, listen: Iterable[str] = (), connect: Iterable[str]
     return conf
 
 
+def config_from_file(path: str) -> zenoh.Config:
+    """A Zenoh config from a JSON5 file, with multicast scouting forced off."""
+    try:
+        conf = zenoh.Config.from_file(path)
+    except (zenoh.ZError, OSError) as exc:
+        raise ValueError(f"{path}: not a valid zenoh config: {exc}") from None
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
+
+
 def open_session(conf: zenoh.Config, what: str) -> zenoh.Session:
     """Open a session, turning zenoh's error into one that says what could not be opened."""
     try:

@@ -1,0 +1,282 @@
+"""Bundles for robot computers and the ground station, from a swarm manifest.
+
+Swarm manifest (TOML, ``version = 1``)::
+
+    version = 1
+    swarm = "field"
+    scenario = "paper.toml"          # formation, gains, robot limits, initial poses (relative
+                                     # to the manifest)
+    [router]
+    address = "192.0.2.10"           # how the robots reach the ground station
+    port = 7447
+    [gcs]
+    mavlink = "udpout:192.0.2.10:14550"
+    [[robots]]
+    id = 1
+    host = "robot-1.local"           # name or address of the robot computer
+    can_interface = "can0"
+    bitrate = 500000
+
+``boundswarm deploy MANIFEST --out DIR`` writes ``DIR/robot-<id>/`` for each robot (agent
+config, Zenoh client config with mutual TLS, the robot's certificate and private key, the
+CA certificate, a MAVLink signing key, a systemd unit and an install script, the project's
+wheel) and ``DIR/ground/`` (the router's config with TLS and access control, its
+certificate and key, the CA, the scenario, notes for the ground-control station). The
+access-control rules let each robot publish only under its own keys.
+"""
+from __future__ import annotations
+
+import json
+import secrets
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from agent.config import TableReader, load_toml
+from agent.settings import AgentSettings, CanSettings, ZenohSettings, settings_to_toml
+from hil.certs import SwarmCA, write_private
+from hil.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+PREFIX = "/opt/boundswarm"          # where install.sh puts the venv on a robot
+ETC = "/etc/boundswarm"
+
+
+class DeployError(ValueError):
+    """A swarm manifest is wrong, or a bundle cannot be written."""
+
+
+@dataclass(frozen=True)
+class RobotEntry:
+    id: int
+    host: str
+    can_interface: str
+    bitrate: int
+
+
+@dataclass(frozen=True)
+class SwarmManifest:
+    path: Path
+    swarm: str
+    scenario: Path
+    router_address: str
+    router_port: int
+    mavlink: str
+    robots: tuple[RobotEntry, ...]
+
+
+def load_manifest(path: str | Path) -> SwarmManifest:
+    path = Path(path)
+    doc = load_toml(path, "swarm manifest", DeployError)
+    rd = TableReader(str(path), DeployError)
+    rd.only(doc, {"version", "swarm", "scenario", "router", "gcs", "robots"}, "top level")
+    if rd.integer(doc, "version", "version") != 1:
+        raise rd.fail("version", f"this boundswarm reads version 1, got {doc['version']}")
+    router = rd.table(doc, "router")
+    rd.only(router, {"address", "port"}, "[router]")
+    gcs = rd.table(doc, "gcs")
+    rd.only(gcs, {"mavlink"}, "[gcs]")
+    robots = []
+    for i, r in enumerate(rd.array_of_tables(doc, "robots", required=True)):
+        f = f"robots[{i}]"
+        rd.only(r, {"id", "host", "can_interface", "bitrate"}, f)
+        robots.append(RobotEntry(rd.integer(r, "id", f"{f}.id", lo=1, hi=255),
+                                 rd.string(r, "host", f"{f}.host"),
+                                 rd.string(r, "can_interface", f"{f}.can_interface", "can0"),
+                                 rd.integer(r, "bitrate", f"{f}.bitrate", 500_000,
+                                            lo=10_000, hi=1_000_000)))
+    ids = [r.id for r in robots]
+    if len(set(ids)) != len(ids):
+        raise rd.fail("robots", f"duplicate robot ids in {ids}")
+    scenario = (path.parent / rd.string(doc, "scenario", "scenario")).resolve()
+    return SwarmManifest(path, rd.string(doc, "swarm", "swarm"), scenario,
+                         rd.string(router, "address", "[router] address"),
+                         rd.integer(router, "port", "[router] port", 7447, lo=1, hi=65535),
+                         rd.string(gcs, "mavlink", "[gcs] mavlink", "udpout:127.0.0.1:14550"),
+                         tuple(robots))
+
+
+def _tls(prefix: str, cn: str, mode: str) -> dict:
+    side = "listen" if mode == "router" else "connect"
+    return {"root_ca_certificate": f"{prefix}/certs/ca.pem",
+            f"{side}_private_key": f"{prefix}/certs/{cn}.key",
+            f"{side}_certificate": f"{prefix}/certs/{cn}.pem",
+            "enable_mtls": True}
+
+
+def router_config(m: SwarmManifest, prefix: str) -> dict:
+    """Zenoh router config: TLS with client certificates, each robot may publish only under
+    its own keys; every authenticated peer may subscribe to the swarm."""
+    base = f"boundswarm/{m.swarm}"
+    rules = [{"id": "subscribe", "permission": "allow", "flows": ["ingress", "egress"],
+              "messages": ["declare_subscriber", "declare_liveliness_subscriber",
+                           "liveliness_query"], "key_exprs": [f"{base}/**"]},
+             {"id": "deliver", "permission": "allow", "flows": ["egress"],
+              "messages": ["put", "delete", "liveliness_token"], "key_exprs": [f"{base}/**"]}]
+    subjects, policies = [], []
+    for r in m.robots:
+        rules.append({"id": f"own-{r.id}", "permission": "allow", "flows": ["ingress"],
+                      "messages": ["put", "delete", "liveliness_token"],
+                      "key_exprs": [f"{base}/robot/{r.id}", f"{base}/robot/{r.id}/**"]})
+        subjects.append({"id": f"robot-{r.id}", "cert_common_names": [f"robot-{r.id}"]})
+        policies.append({"rules": ["subscribe", "deliver", f"own-{r.id}"],
+                         "subjects": [f"robot-{r.id}"]})
+    rules.append({"id": "ground", "permission": "allow", "flows": ["ingress", "egress"],
+                  "messages": ["put", "delete", "liveliness_token"], "key_exprs": [f"{base}/**"]})
+    subjects.append({"id": "ground", "cert_common_names": ["ground"]})
+    policies.append({"rules": ["subscribe", "ground"], "subjects": ["ground"]})
+    return {"mode": "router", "scouting": {"multicast": {"enabled": False}},
+            "listen": {"endpoints": [f"tls/0.0.0.0:{m.router_port}"]},
+            "transport": {"link": {"tls": _tls(prefix, "router", "router")}},
+            "access_control": {"enabled": True, "default_permission": "deny", "rules": rules,
+                               "subjects": subjects, "policies": policies}}
+
+
+def client_config(m: SwarmManifest, cn: str, prefix: str) -> dict:
+    return {"mode": "client", "scouting": {"multicast": {"enabled": False}},
+            "connect": {"endpoints": [f"tls/{m.router_address}:{m.router_port}"]},
+            "transport": {"link": {"tls": _tls(prefix, cn, "client")}}}
+
+
+UNIT = """[Unit]
+Description=boundswarm agent of robot {id}
+Documentation=https://pypi.org/project/boundswarm/
+After=network-online.target
+Wants=network-online.target
+
+[Service]
+Type=notify
+NotifyAccess=main
+User=boundswarm
+WorkingDirectory={etc}
+ExecStartPre=+/usr/sbin/ip link set {can} down
+ExecStartPre=+/usr/sbin/ip link set {can} up type can bitrate {bitrate} restart-ms 100
+ExecStart={prefix}/venv/bin/boundswarm agent --config {etc}/agent.toml
+# READY once both drivers are armed; the watchdog is fed only while the loop is on time
+WatchdogSec=2
+TimeoutStartSec=30
+# SIGTERM: zero velocity, drivers IDLE, liveliness dropped
+KillSignal=SIGTERM
+TimeoutStopSec=5
+Restart=on-failure
+RestartSec=2
+
+[Install]
+WantedBy=multi-user.target
+"""
+
+INSTALL = """#!/bin/sh
+# Install the boundswarm agent of robot {id} on this computer (run as root).
+set -eu
+HERE=$(cd "$(dirname "$0")" && pwd)
+id -u boundswarm >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin boundswarm
+python3 -m venv {prefix}/venv
+{prefix}/venv/bin/pip install --quiet "$HERE"/wheels/*.whl
+install -d -m 0750 -o root -g boundswarm {etc} {etc}/certs
+install -m 0640 -o root -g boundswarm "$HERE"/agent.toml "$HERE"/zenoh.json5 {etc}/
+install -m 0644 "$HERE"/certs/ca.pem "$HERE"/certs/robot-{id}.pem {etc}/certs/
+install -m 0640 -o root -g boundswarm "$HERE"/certs/robot-{id}.key {etc}/certs/
+install -m 0640 -o root -g boundswarm "$HERE"/mavlink.key {etc}/
+install -m 0644 "$HERE"/boundswarm-agent.service /etc/systemd/system/
+systemctl daemon-reload
+systemctl enable boundswarm-agent.service
+echo "installed; start with: systemctl start boundswarm-agent"
+"""
+
+
+def build_wheel(out: Path) -> Path:
+    """The project's wheel (pip wheel, no dependencies) into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps",
+                           "--wheel-dir", str(out), str(ROOT)], capture_output=True, text=True)
+    wheels = sorted(out.glob("boundswarm-*.whl"))
+    if proc.returncode != 0 or not wheels:
+        raise DeployError(f"could not build the boundswarm wheel: {proc.stderr[-500:]}")
+    return wheels[-1]
+
+
+def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
+           prefix: str = PREFIX, etc: str = ETC) -> dict[str, Path]:
+    """Write every bundle; returns {name: folder}."""
+    try:
+        sc = load_scenario(manifest.scenario)
+    except ValueError as exc:
+        raise DeployError(f"{manifest.path}: scenario: {exc}") from None
+    index = {int(i): k for k, i in enumerate(sc.ids)}
+    missing = [r.id for r in manifest.robots if r.id not in index]
+    if missing:
+        raise DeployError(f"{manifest.path}: robots {missing} are not in {manifest.scenario}")
+    ca = SwarmCA(manifest.swarm)
+    wheel = wheel or build_wheel(out / "wheels")
+    bundles: dict[str, Path] = {}
+
+    ground = out / "ground"
+    (ground / "certs").mkdir(parents=True, exist_ok=True)
+    (ground / "certs" / "ca.pem").write_bytes(ca.cert_pem)
+    for cn, hosts in (("router", [manifest.router_address]), ("ground", ["ground"])):
+        issued = ca.issue(cn, hosts)
+        (ground / "certs" / f"{cn}.pem").write_bytes(issued.cert_pem)
+        write_private(ground / "certs" / f"{cn}.key", issued.key_pem)
+    (ground / "router.json5").write_text(json.dumps(router_config(manifest, "."), indent=2))
+    (ground / "ground-client.json5").write_text(
+        json.dumps(client_config(manifest, "ground", "."), indent=2))
+    shutil.copy(manifest.scenario, ground / "scenario.toml")
+    keys = {}
+    for r in manifest.robots:
+        keys[r.id] = secrets.token_bytes(32)
+        write_private(ground / f"mavlink-robot-{r.id}.key", keys[r.id])
+    (ground / "README.md").write_text(_ground_notes(manifest))
+    bundles["ground"] = ground
+
+    for r in manifest.robots:
+        b = out / f"robot-{r.id}"
+        (b / "certs").mkdir(parents=True, exist_ok=True)
+        (b / "wheels").mkdir(exist_ok=True)
+        shutil.copy(wheel, b / "wheels" / wheel.name)
+        (b / "certs" / "ca.pem").write_bytes(ca.cert_pem)
+        issued = ca.issue(f"robot-{r.id}", [r.host])
+        (b / "certs" / f"robot-{r.id}.pem").write_bytes(issued.cert_pem)
+        write_private(b / "certs" / f"robot-{r.id}.key", issued.key_pem)
+        write_private(b / "mavlink.key", keys[r.id])
+        (b / "zenoh.json5").write_text(json.dumps(client_config(manifest, f"robot-{r.id}", etc),
+                                                  indent=2))
+        k = index[r.id]
+        settings = AgentSettings(
+            robot_id=r.id, swarm=manifest.swarm, initial_pose=tuple(map(float, sc.poses[k])),
+            control=sc.control, robot=sc.robot,
+            can=CanSettings(interface="socketcan", channel=r.can_interface, bitrate=r.bitrate),
+            zenoh=ZenohSettings(mode="client", connect=(), config="zenoh.json5"),
+            autostart=True, sensing_range=sc.sensing_range)
+        (b / "agent.toml").write_text(settings_to_toml(settings))
+        (b / "boundswarm-agent.service").write_text(UNIT.format(
+            id=r.id, etc=etc, prefix=prefix, can=r.can_interface, bitrate=r.bitrate))
+        install = b / "install.sh"
+        install.write_text(INSTALL.format(id=r.id, etc=etc, prefix=prefix))
+        install.chmod(0o755)
+        bundles[f"robot-{r.id}"] = b
+    return bundles
+
+
+def _ground_notes(m: SwarmManifest) -> str:
+    return f"""# Ground station of swarm "{m.swarm}"
+
+1. Router (Zenoh, mutual TLS, access control; robots connect to
+   tls/{m.router_address}:{m.router_port}):
+
+       boundswarm router --config router.json5
+
+2. Start the mission when every robot is alive (the epoch is shared by all agents; keep
+   the clocks of all computers in sync, e.g. with chrony):
+
+       boundswarm mission --config ground-client.json5 --swarm {m.swarm} \\
+           --scenario scenario.toml --start-in 5
+
+3. Ground-control station: every agent is a MAVLink 2 system (system id = robot id) sending
+   to {m.mavlink}; the MAVLink signing keys are mavlink-robot-<id>.key (32 bytes each).
+
+Each robot bundle holds only its own private key. Re-run `boundswarm deploy` to rotate all
+certificates.
+"""
+

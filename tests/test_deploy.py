@@ -1,0 +1,194 @@
+"""Deployment bundles: manifest validation, certificates, systemd units, and the ground
+router's mutual TLS and access control with real Zenoh sessions on loopback."""
+import json
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+from cryptography import x509
+
+from hil.deploy import DeployError, deploy, load_manifest
+
+ROOT = Path(__file__).resolve().parent.parent
+VENV_BIN = Path(sys.executable).parent
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+MANIFEST = """version = 1
+swarm = "field"
+scenario = "{scenario}"
+[router]
+address = "127.0.0.1"
+port = {port}
+[gcs]
+mavlink = "udpout:127.0.0.1:14550"
+[[robots]]
+id = 1
+host = "robot-1.local"
+can_interface = "can0"
+[[robots]]
+id = 2
+host = "robot-2.local"
+can_interface = "can1"
+bitrate = 1000000
+"""
+
+
+@pytest.fixture(scope="module")
+def bundles(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("deploy")
+    port = free_port()
+    path = tmp / "swarm.toml"
+    path.write_text(MANIFEST.format(scenario=ROOT / "scenarios" / "sitl_small.toml", port=port))
+    prefix = tmp / "prefix"                       # where install.sh would put the venv
+    (prefix / "venv" / "bin").mkdir(parents=True)
+    (prefix / "venv" / "bin" / "boundswarm").symlink_to(VENV_BIN / "boundswarm")
+    out = tmp / "out"
+    made = deploy(load_manifest(path), out, prefix=str(prefix), etc=str(out / "robot-1"))
+    return {"out": out, "port": port, "made": made}
+
+
+def test_bundle_contents_and_private_keys(bundles):
+    out = bundles["out"]
+    assert set(bundles["made"]) == {"ground", "robot-1", "robot-2"}
+    r1 = {p.relative_to(out / "robot-1").as_posix() for p in (out / "robot-1").rglob("*")
+          if p.is_file()}
+    assert {"agent.toml", "zenoh.json5", "boundswarm-agent.service", "install.sh",
+            "mavlink.key", "certs/ca.pem", "certs/robot-1.pem", "certs/robot-1.key"} <= r1
+    assert not [p for p in r1 if p.endswith(".key") and p not in ("mavlink.key",
+                                                                   "certs/robot-1.key")]
+    assert any(p.startswith("wheels/boundswarm-") for p in r1)
+    assert (out / "robot-1" / "certs" / "robot-1.key").stat().st_mode & 0o077 == 0
+    assert len((out / "robot-1" / "mavlink.key").read_bytes()) == 32
+    ca = x509.load_pem_x509_certificate((out / "ground" / "certs" / "ca.pem").read_bytes())
+    cert = x509.load_pem_x509_certificate((out / "robot-2" / "certs" / "robot-2.pem").read_bytes())
+    cert.verify_directly_issued_by(ca)
+    assert cert.subject.rfc4514_string().endswith("CN=robot-2") or \
+        "CN=robot-2" in cert.subject.rfc4514_string()
+    agent = (out / "robot-2" / "agent.toml").read_text()
+    assert 'channel = "can1"' in agent and "bitrate = 1000000" in agent
+    assert 'config = "zenoh.json5"' in agent
+    unit = (out / "robot-2" / "boundswarm-agent.service").read_text()
+    assert "Type=notify" in unit and "WatchdogSec=" in unit and "Restart=on-failure" in unit
+    assert "ip link set can1 up type can bitrate 1000000" in unit
+
+
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None,
+                    reason="systemd-analyze is not installed")
+def test_units_pass_systemd_analyze_verify(bundles):
+    for name in ("robot-1", "robot-2"):
+        unit = bundles["out"] / name / "boundswarm-agent.service"
+        proc = subprocess.run(["systemd-analyze", "verify", str(unit)], capture_output=True,
+                              text=True)
+        assert proc.returncode == 0, proc.stderr
+
+
+def test_manifest_errors_name_the_field(tmp_path):
+    good = MANIFEST.format(scenario=ROOT / "scenarios" / "sitl_small.toml", port=7447)
+    for bad, field in [(good.replace("version = 1", "version = 2"), "version"),
+                       (good.replace('host = "robot-1.local"\n', ""), r"robots\[0\].host"),
+                       (good.replace("id = 2", "id = 1"), "duplicate robot ids"),
+                       (good.replace("port = 7447", "port = 0"), r"\[router\] port"),
+                       (good + "colour = 1\n", r"robots\[1\]: unknown")]:
+        path = tmp_path / "m.toml"
+        path.write_text(bad)
+        with pytest.raises(DeployError, match=field):
+            load_manifest(path)
+    path = tmp_path / "m.toml"
+    path.write_text(good.replace("id = 2", "id = 9"))
+    with pytest.raises(DeployError, match=r"robots \[9\] are not in"):
+        deploy(load_manifest(path), tmp_path / "o", wheel=ROOT / "README.md")
+
+
+def _conf(path: Path) -> zenoh.Config:
+    conf = zenoh.Config.from_file(str(path))
+    conf.insert_json5("connect/timeout_ms", "1500")
+    conf.insert_json5("connect/exit_on_failure", "true")
+    return conf
+
+
+def _client(out: Path, cn: str, port: int) -> zenoh.Session:
+    """A client with ``cn``'s bundle certificate (paths made absolute for this test)."""
+    base = out / ("ground" if cn == "ground" else cn)
+    doc = json.loads((base / ("ground-client.json5" if cn == "ground" else "zenoh.json5"))
+                     .read_text())
+    tls = doc["transport"]["link"]["tls"]
+    for k in ("root_ca_certificate", "connect_private_key", "connect_certificate"):
+        tls[k] = str(base / "certs" / Path(tls[k]).name)
+    doc["connect"]["endpoints"] = [f"tls/127.0.0.1:{port}"]
+    p = base / f"test-{cn}.json5"
+    p.write_text(json.dumps(doc))
+    return zenoh.open(_conf(p))
+
+
+@pytest.fixture
+def router(bundles):
+    out, port = bundles["out"], bundles["port"]
+    doc = json.loads((out / "ground" / "router.json5").read_text())
+    tls = doc["transport"]["link"]["tls"]
+    for k in ("root_ca_certificate", "listen_private_key", "listen_certificate"):
+        tls[k] = str(out / "ground" / "certs" / Path(tls[k]).name)
+    doc["listen"]["endpoints"] = [f"tls/127.0.0.1:{port}"]
+    path = out / "ground" / "test-router.json5"
+    path.write_text(json.dumps(doc))
+    session = zenoh.open(zenoh.Config.from_file(str(path)))
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+def test_client_without_a_valid_certificate_cannot_connect(bundles, router, tmp_path):
+    port = bundles["port"]
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("connect/endpoints", json.dumps([f"tls/127.0.0.1:{port}"]))
+    conf.insert_json5("connect/timeout_ms", "1500")
+    conf.insert_json5("connect/exit_on_failure", "true")
+    conf.insert_json5("transport/link/tls/root_ca_certificate",
+                      json.dumps(str(bundles["out"] / "ground" / "certs" / "ca.pem")))
+    with pytest.raises(zenoh.ZError):
+        zenoh.open(conf).close()
+    # a certificate from another swarm's CA is refused too
+    other = tmp_path / "other"
+    path = tmp_path / "m.toml"
+    path.write_text(MANIFEST.format(scenario=ROOT / "scenarios" / "sitl_small.toml",
+                                    port=port))
+    deploy(load_manifest(path), other, wheel=ROOT / "README.md")
+    with pytest.raises(zenoh.ZError):
+        _client(other, "robot-1", port).close()
+
+
+def test_a_robot_cannot_publish_on_another_robots_key(bundles, router):
+    out, port = bundles["out"], bundles["port"]
+    ground, r1, r2 = (_client(out, cn, port) for cn in ("ground", "robot-1", "robot-2"))
+    got = []
+    try:
+        ground.declare_subscriber("boundswarm/field/**",
+                                  lambda s: got.append((str(s.key_expr),
+                                                        s.payload.to_bytes())))
+        time.sleep(0.5)
+        r1.put("boundswarm/field/robot/1/state", b"from robot 1")
+        r2.put("boundswarm/field/robot/1/state", b"spoofed by robot 2")
+        r2.put("boundswarm/field/robot/2/state", b"from robot 2")
+        deadline = time.monotonic() + 3
+        while len(got) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.3)
+    finally:
+        for s in (ground, r1, r2):
+            s.close()
+    assert ("boundswarm/field/robot/1/state", b"from robot 1") in got
+    assert ("boundswarm/field/robot/2/state", b"from robot 2") in got
+    assert ("boundswarm/field/robot/1/state", b"spoofed by robot 2") not in got
