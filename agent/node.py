@@ -37,6 +37,9 @@ from transport.payloads import MissionMsg, StateFlags, StateMsg
 log = logging.getLogger(__name__)
 
 
+ARM_RETRY = 0.25   # s between repeated arm requests while the drivers have not answered
+
+
 class AgentMode(enum.Enum):
     DISARMED = "DISARMED"
     HOLD = "HOLD"
@@ -82,17 +85,23 @@ class Agent:
         self._mission_key: tuple | None = None
         self._formation: Formation | None = None
         self._armed_at = -math.inf         # monotonic time of the last arm request
+        self._arming = False               # waiting for both drivers to enter closed loop
+        self._arm_sent = -math.inf
 
     # --- commands (from the process, a ground station or autostart) ---------------------
     def arm(self) -> None:
+        """Request closed loop; the request is repeated until both drivers report it (they
+        may boot after the robot computer), for at most ``arm_timeout``."""
         self.motor.arm()
         self.failsafe = None
-        self._armed_at = self.clock.monotonic()
+        self._armed_at = self._arm_sent = self.clock.monotonic()
+        self._arming = True
         if self.mode is AgentMode.DISARMED:
             self.mode = AgentMode.HOLD
         log.info("robot %d armed", self.s.robot_id)
 
     def disarm(self) -> None:
+        self._arming = False
         self.motor.disarm()
         self.mode = AgentMode.DISARMED
         log.info("robot %d disarmed", self.s.robot_id)
@@ -126,7 +135,7 @@ class Agent:
         self.law_mode = Mode.TRACK
         if self.mode is not AgentMode.DISARMED:
             self._check_feedback(fb, now_m)
-            if self.mode is AgentMode.FORMATION and self.failsafe is None:
+            if self.mode is AgentMode.FORMATION and self.failsafe is None and not self._arming:
                 v, u = self._formation_step(pose, mission, now_m, now_w)
         else:
             self._last_law = None
@@ -149,15 +158,29 @@ class Agent:
         self._publish(pose, now_w)
 
     def _check_feedback(self, fb: WheelFeedback | None, now_m: float) -> None:
-        """Failsafe on lost feedback, a driver error, or drivers that do not enter closed
-        loop; the drivers get one feedback timeout after an arm request to answer."""
+        """Failsafe on lost feedback, a driver error, or drivers that leave closed loop.
+
+        While arming, the arm request is repeated every ``ARM_RETRY`` s until both drivers
+        report closed loop; only a driver error, or ``arm_timeout`` without success, is a
+        failsafe then."""
         reason = None
-        settling = now_m - self._armed_at <= self.s.feedback_timeout
-        if fb is None or fb.age > self.s.feedback_timeout:
-            reason = None if settling else "driver feedback lost"
-        elif fb.errors:
+        fresh = fb is not None and fb.age <= self.s.feedback_timeout
+        if fresh and fb.errors:
             reason = "driver error: " + ", ".join(fb.errors)
-        elif not fb.closed_loop and not settling:
+        elif self._arming:
+            if fresh and fb.closed_loop:
+                self._arming = False
+                log.info("robot %d: both drivers in closed loop", self.s.robot_id)
+            elif now_m - self._armed_at > self.s.arm_timeout:
+                self._arming = False
+                reason = (f"drivers not armed within {self.s.arm_timeout:g} s"
+                          + ("" if fresh else " (no feedback)"))
+            elif now_m - self._arm_sent >= ARM_RETRY:
+                self.motor.arm()
+                self._arm_sent = now_m
+        elif not fresh:
+            reason = "driver feedback lost"
+        elif not fb.closed_loop:
             reason = "drivers not in closed loop control"
         if reason and self.failsafe is None:
             self.failsafe = reason

@@ -11,7 +11,7 @@
     [can]                           # python-can terms: interface, channel, port (udp_multicast),
                                     # bitrate; left_node, right_node (ODrive node ids)
     [zenoh]                         # mode ("client" or "peer"), connect = [...], listen = [...]
-    [timeouts]                      # feedback (0.2 s), staleness (0.5 s)
+    [timeouts]                      # feedback (0.2 s), staleness (0.5 s), arm (5 s)
     [sensing]                       # range (m, default 2c)
 
 Every problem raises :class:`agent.config.ConfigError` naming the file and the field.
@@ -60,6 +60,7 @@ class AgentSettings:
     zenoh: ZenohSettings = field(default_factory=ZenohSettings)
     autostart: bool = False
     feedback_timeout: float = 0.2     # s without encoder estimates -> zero, HOLD, CRITICAL
+    arm_timeout: float = 5.0          # s for both drivers to enter closed loop after arming
     staleness: float = 0.5            # s, neighbour kept as a static obstacle beyond this
     sensing_range: float = 8.0        # m
 
@@ -99,7 +100,8 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
         raise rd.fail("[zenoh] connect", "a client needs at least one router endpoint")
 
     t = rd.table(doc, "timeouts")
-    rd.only(t, {"feedback", "staleness"}, "[timeouts]")
+    rd.only(t, {"feedback", "staleness", "arm"}, "[timeouts]")
+    arm = rd.number(t, "arm", "[timeouts] arm", 5.0, positive=True)
     feedback = rd.number(t, "feedback", "[timeouts] feedback", 0.2, positive=True)
     staleness = rd.number(t, "staleness", "[timeouts] staleness", 0.5, positive=True)
     if feedback < 2 * control.period:
@@ -119,7 +121,8 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
         robot_id=rd.integer(doc, "robot_id", "robot_id", lo=1, hi=255), swarm=swarm,
         initial_pose=rd.vector(doc, "initial_pose", "initial_pose", 3),
         control=control, robot=robot, can=can, zenoh=zenoh, autostart=autostart,
-        feedback_timeout=feedback, staleness=staleness, sensing_range=sensing)
+        feedback_timeout=feedback, staleness=staleness, sensing_range=sensing,
+        arm_timeout=arm)
 
 
 def load_settings(path: str | Path) -> AgentSettings:
@@ -153,7 +156,8 @@ def settings_to_toml(s: AgentSettings) -> str:
     tables = {"control": dataclasses.asdict(s.control), "robot": dataclasses.asdict(s.robot),
               "can": {k: v for k, v in dataclasses.asdict(s.can).items() if v is not None},
               "zenoh": {k: v for k, v in dataclasses.asdict(s.zenoh).items() if v is not None},
-              "timeouts": {"feedback": s.feedback_timeout, "staleness": s.staleness},
+              "timeouts": {"feedback": s.feedback_timeout, "staleness": s.staleness,
+                           "arm": s.arm_timeout},
               "sensing": {"range": s.sensing_range}}
     for name, table in tables.items():
         lines.append(f"\n[{name}]")

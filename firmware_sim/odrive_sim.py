@@ -233,9 +233,10 @@ class DriverPair:
         for axis in self.axes.values():
             axis.step(dt)
 
-    def wheel_velocities(self) -> tuple[float, float]:
-        """(right, left) actual wheel speeds [rev/s]."""
-        return self.axes[self.right_node].vel, self.axes[self.left_node].vel
+    def wheel_state(self) -> tuple[float, float, float, float]:
+        """(right, left) wheel positions [rev] and actual speeds [rev/s]."""
+        r, l_ = self.axes[self.right_node], self.axes[self.left_node]
+        return r.pos, l_.pos, r.vel, l_.vel
 
     def close(self) -> None:
         self.bus.shutdown()

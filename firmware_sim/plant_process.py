@@ -22,7 +22,8 @@ from agent.loop import FixedRateLoop, SystemClock
 from firmware_sim.odrive_sim import DriverPair
 from firmware_sim.sitl_plant import PlantRobot, SitlPlant
 from transport.canbus import open_bus
-from transport.zenoh_link import Keys, open_session, session_config
+from transport.payloads import WheelsMsg
+from transport.zenoh_link import Keys, Latest, open_session, session_config
 
 log = logging.getLogger(__name__)
 
@@ -35,8 +36,12 @@ def _stop_on_signals(stop: Callable[[], None]) -> None:
 
 
 def run_drivers_only(drivers: DriverPair, dt: float = 0.001,
-                     max_ticks: int | None = None) -> None:
-    """Serve ``drivers`` until a signal (or ``max_ticks``)."""
+                     max_ticks: int | None = None,
+                     publish_wheels: Callable[..., None] | None = None,
+                     publish_every: int = 5) -> None:
+    """Serve ``drivers`` until a signal (or ``max_ticks``). ``publish_wheels(right_pos,
+    left_pos, right_vel, left_vel, stamp)``, when given, is called every ``publish_every``
+    ticks, for a world simulated on another host."""
     clock = SystemClock()
     loop = FixedRateLoop(dt, clock)
     _stop_on_signals(loop.stop)
@@ -44,6 +49,8 @@ def run_drivers_only(drivers: DriverPair, dt: float = 0.001,
     def tick(k: int, deadline: float) -> None:
         drivers.service(clock.monotonic())
         drivers.step(dt)
+        if publish_wheels is not None and k % publish_every == 0:
+            publish_wheels(*drivers.wheel_state(), clock.wall())
 
     try:
         loop.run(tick, max_ticks=max_ticks)
@@ -51,6 +58,65 @@ def run_drivers_only(drivers: DriverPair, dt: float = 0.001,
         drivers.close()
         log.info("drivers stopped after %d ticks (%d overruns)", loop.stats.ticks,
                  loop.stats.overruns)
+
+
+class RemoteWheels:
+    """A robot's wheels whose drivers run on another host (they publish WheelsMsg): the
+    latest positions and speeds (speeds zero once older than ``stale`` seconds)."""
+
+    def __init__(self, cache: Latest, robot_id: int, clock: Callable[[], float],
+                 stale: float = 0.1):
+        self.cache, self.robot_id, self.clock, self.stale = cache, robot_id, clock, stale
+
+    def service(self, now: float) -> None:
+        """Nothing to serve: the drivers are remote."""
+
+    def step(self, dt: float) -> None:
+        """Nothing to advance: the drivers are remote."""
+
+    def wheel_state(self) -> tuple[float, float, float, float]:
+        got = self.cache.snapshot().get(self.robot_id)
+        if got is None:
+            return 0.0, 0.0, 0.0, 0.0
+        m = got.msg
+        if self.clock() - m.stamp > self.stale:
+            return m.right_pos, m.left_pos, 0.0, 0.0
+        return m.right_pos, m.left_pos, m.right_vel, m.left_vel
+
+    def close(self) -> None:
+        """The cache is closed by its owner."""
+
+
+def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
+    """The world of a multi-host SITL: robots moved by the wheel speeds their remote drivers
+    publish; truth and obstacle detections published. Runs until a signal."""
+    clock = SystemClock()
+    keys = Keys(swarm)
+    session = open_session(conf, "the world")
+    try:
+        cache = Latest(session, keys.wheels("*"), WheelsMsg.decode, clock.wall,
+                       capacity=64 * len(scenario.ids))
+        robots = [PlantRobot(int(rid), np.array(pose, float),
+                             RemoteWheels(cache, int(rid), clock.wall))
+                  for rid, pose in zip(scenario.ids, scenario.poses)]
+        publishers = {(kind, rb.robot_id): session.declare_publisher(
+            getattr(keys, kind)(rb.robot_id)) for rb in robots for kind in ("truth", "obstacles")}
+        plant = SitlPlant(robots, scenario.robot, scenario.obstacles, scenario.sensing_range,
+                          lambda kind, rid, data: publishers[(kind, rid)].put(data))
+        loop = FixedRateLoop(dt, clock)
+        _stop_on_signals(loop.stop)
+        last = [clock.monotonic()]
+
+        def tick(k: int, deadline: float) -> None:
+            now = clock.monotonic()
+            step, last[0] = min(now - last[0], MAX_STEP), now
+            plant.step(step, now, clock.wall())
+
+        loop.run(tick)
+        cache.close()
+        return loop.stats.summary()
+    finally:
+        session.close()
 
 
 def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str],

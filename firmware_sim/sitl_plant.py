@@ -1,8 +1,9 @@
 """The SITL plant: emulated wheel drivers on CAN moving simulated robots, over real time.
 
 For each hosted robot the plant serves its two emulated drivers on the robot's own CAN bus
-and, every physics step, moves the robot along the exact arc given by the drivers' *actual*
-wheel speeds (after their limits, ramps, watchdogs and faults). It publishes on Zenoh what
+and, every physics step, moves the robot along the exact arc its wheels turned through
+(the drivers' encoder positions, after their limits, ramps, watchdogs and faults), so the
+ground truth and the agent's odometry differ only by what the agent has not read yet. It publishes on Zenoh what
 the real world would give the robot's sensors: obstacle detections within sensing range
 (10 Hz) and, SITL only, the ground truth (every ``truth_every`` physics steps).
 """
@@ -15,7 +16,8 @@ from typing import Callable, Mapping, Protocol
 import numpy as np
 
 from agent.config import RobotParams
-from agent.kinematics import TWO_PI, body_velocity, integrate_arc
+from agent.kinematics import TWO_PI, body_velocity
+from agent.odometry import Odometry
 from firmware_sim.world import Obstacles
 from transport.payloads import ObstaclesMsg, TruthMsg
 
@@ -27,7 +29,8 @@ class DriverPair(Protocol):
 
     def service(self, now: float) -> None: ...          # CAN in/out, periodic frames, watchdog
     def step(self, dt: float) -> None: ...              # advance the axes by dt [s]
-    def wheel_velocities(self) -> tuple[float, float]: ...  # (right, left) actual [rev/s]
+    def wheel_state(self) -> tuple[float, float, float, float]: ...
+    # (right, left) positions [rev], then (right, left) actual speeds [rev/s]
     def close(self) -> None: ...
 
 
@@ -38,6 +41,7 @@ class PlantRobot:
     drivers: DriverPair
     v: float = 0.0            # m/s, actual
     u: float = 0.0            # rad/s, actual
+    wheels: Odometry | None = None   # the motion: exact arcs between wheel positions
 
 
 class SitlPlant:
@@ -59,10 +63,12 @@ class SitlPlant:
         for rb in self.robots:
             rb.drivers.service(now_m)
             rb.drivers.step(dt)
-            right, left = rb.drivers.wheel_velocities()
+            right_pos, left_pos, right, left = rb.drivers.wheel_state()
             v, u = body_velocity(TWO_PI * right, TWO_PI * left, r.wheel_radius, r.wheel_base)
             rb.v, rb.u = float(v), float(u)
-            rb.pose = integrate_arc(rb.pose, rb.v, rb.u, dt)
+            if rb.wheels is None:       # the robot rolls exactly as its wheels turned
+                rb.wheels = Odometry(r.wheel_radius, r.wheel_base, rb.pose.copy())
+            rb.pose = rb.wheels.update(right_pos, left_pos).copy()
         self._steps += 1
         if self._steps % self.truth_every == 0:
             self._seq += 1

@@ -183,6 +183,28 @@ def cmd_mission(args: argparse.Namespace, console: Console) -> int:
     return EXIT_OK
 
 
+def cmd_record(args: argparse.Namespace, console: Console) -> int:
+    """Record a swarm's Zenoh traffic into an MCAP file."""
+    import signal
+    import threading
+    from hil.recorder import Recorder
+    from transport.zenoh_link import Keys, config_from_file, open_session, session_config
+    conf = (config_from_file(args.config) if args.config
+            else session_config("client", connect=args.connect or []))
+    session = open_session(conf, "the recorder")
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    recorder = Recorder(session, Keys(args.swarm), Path(args.out))
+    try:
+        stop.wait(args.duration)
+    finally:
+        recorder.close()
+        session.close()
+    console.print(f"{recorder.recorded} messages recorded into {args.out}")
+    return EXIT_OK
+
+
 def cmd_report(args: argparse.Namespace, console: Console) -> int:
     """Redraw the figures of a saved run and show its metrics."""
     run = Path(args.run)
@@ -217,13 +239,45 @@ def cmd_plant(args: argparse.Namespace, console: Console) -> int:
     from firmware_sim.odrive_sim import DriverPair
     from firmware_sim.plant_process import run_drivers_only, run_sitl_plant
     from transport.canbus import open_bus
+    from transport.zenoh_link import config_from_file, session_config
+    conf = (config_from_file(args.zenoh_config) if args.zenoh_config else
+            session_config("client", connect=args.zenoh_connect) if args.zenoh_connect
+            else None)
     if args.drivers_only:
         bus = open_bus(args.can_interface, args.can_channel, port=args.can_port)
         drivers = DriverPair(bus, right_node=args.right_node, left_node=args.left_node)
         drivers.configure(vel_limit=args.vel_limit, ramp=args.ramp, watchdog=args.watchdog)
         console.print(f"emulated drivers (nodes {args.left_node} left, {args.right_node} "
                       f"right) on {args.can_interface} {args.can_channel or ''}; Ctrl-C stops")
-        run_drivers_only(drivers)
+        if conf is None:
+            run_drivers_only(drivers)
+            return EXIT_OK
+        if not (args.robot and args.swarm):
+            raise ValueError("plant --drivers-only with zenoh needs --robot and --swarm")
+        from transport.payloads import WheelsMsg
+        from transport.zenoh_link import Keys, open_session
+        session = open_session(conf, f"drivers of robot {args.robot}")
+        pub = session.declare_publisher(Keys(args.swarm).wheels(args.robot))
+        seq = [0]
+
+        def publish(right_pos: float, left_pos: float, right_vel: float, left_vel: float,
+                    stamp: float) -> None:
+            seq[0] += 1
+            pub.put(WheelsMsg(args.robot, seq[0], stamp, right_pos, left_pos, right_vel,
+                              left_vel).encode())
+        try:
+            run_drivers_only(drivers, publish_wheels=publish)
+        finally:
+            session.close()
+        return EXIT_OK
+    if args.world_only:
+        from firmware_sim.plant_process import run_world
+        if not (args.scenario and args.swarm and conf is not None):
+            raise ValueError("plant --world-only needs --scenario, --swarm and a zenoh "
+                             "endpoint (--zenoh-connect or --zenoh-config)")
+        stats = run_world(load_scenario(args.scenario), args.swarm, conf)
+        if args.stats:
+            Path(args.stats).write_text(json.dumps(stats, indent=2) + "\n")
         return EXIT_OK
     if not (args.scenario and args.swarm and args.zenoh_connect):
         raise ValueError("plant: give --drivers-only, or --scenario, --swarm and "
@@ -286,7 +340,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     plant = sub.add_parser("plant", help="the SITL plant, or emulated drivers only")
     plant.add_argument("--drivers-only", action="store_true",
-                       help="serve one robot's two emulated drivers on the bus (HIL bench)")
+                       help="serve one robot's two emulated drivers on the bus (HIL bench); "
+                            "with zenoh options, also publish their wheel speeds")
+    plant.add_argument("--world-only", action="store_true",
+                       help="multi-host SITL: move the robots from the wheel speeds their "
+                            "remote drivers publish")
+    plant.add_argument("--robot", type=int, help="drivers-only with zenoh: the robot id")
+    plant.add_argument("--zenoh-config", help="zenoh config file (JSON5), e.g. with TLS")
     add_can_options(plant)
     plant.add_argument("--can-port", type=int, help="udp_multicast port of the bus")
     plant.add_argument("--can-base-port", type=int,
@@ -324,6 +384,14 @@ def build_parser() -> argparse.ArgumentParser:
     mission.add_argument("--wait", type=float, default=30.0,
                          help="s to wait for every robot's liveliness token")
     mission.set_defaults(func=cmd_mission)
+
+    record = sub.add_parser("record", help="record a swarm's Zenoh traffic (MCAP)")
+    record.add_argument("--swarm", required=True)
+    record.add_argument("--out", required=True, help="MCAP file to write")
+    record.add_argument("--config", help="zenoh client config (JSON5), e.g. with TLS")
+    record.add_argument("--connect", action="append", help="router endpoint (no config)")
+    record.add_argument("--duration", type=float, help="s (default: until Ctrl-C)")
+    record.set_defaults(func=cmd_record)
 
     report = sub.add_parser("report", help="figures and metrics from a recorded run")
     report.add_argument("run", help="run folder written by sim or sitl")

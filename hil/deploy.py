@@ -135,8 +135,10 @@ def router_config(m: SwarmManifest, prefix: str) -> dict:
 
 
 def client_config(m: SwarmManifest, cn: str, prefix: str) -> dict:
+    # a robot may boot before the ground station: keep trying the router for 60 s
     return {"mode": "client", "scouting": {"multicast": {"enabled": False}},
-            "connect": {"endpoints": [f"tls/{m.router_address}:{m.router_port}"]},
+            "connect": {"endpoints": [f"tls/{m.router_address}:{m.router_port}"],
+                        "timeout_ms": 60000, "exit_on_failure": True},
             "transport": {"link": {"tls": _tls(prefix, cn, "client")}}}
 
 
@@ -240,7 +242,8 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
         (b / "certs" / f"robot-{r.id}.pem").write_bytes(issued.cert_pem)
         write_private(b / "certs" / f"robot-{r.id}.key", issued.key_pem)
         write_private(b / "mavlink.key", keys[r.id])
-        (b / "zenoh.json5").write_text(json.dumps(client_config(manifest, f"robot-{r.id}", etc),
+        # certificate paths relative to the working directory (the unit's is ETC)
+        (b / "zenoh.json5").write_text(json.dumps(client_config(manifest, f"robot-{r.id}", "."),
                                                   indent=2))
         k = index[r.id]
         settings = AgentSettings(

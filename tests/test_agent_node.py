@@ -144,12 +144,23 @@ def test_mode_requests_are_validated():
     assert agent.mode is AgentMode.DISARMED and not agent.motor.armed
 
 
-def test_drivers_get_one_feedback_timeout_to_answer_an_arm():
+def test_arming_waits_for_drivers_that_boot_late_and_repeats_the_request():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(20.0, 0.0))
+    agent.motor.silent = True
+    agent.arm()
+    agent.motor.armed = False                  # the first request was lost
+    agent.set_mode(AgentMode.FORMATION)
+    run(clock, [agent], 2.0)
+    assert agent.failsafe is None and agent.motor.pos.sum() == 0
+    agent.motor.silent = False                 # the drivers come up
+    run(clock, [agent], 1.0)
+    assert agent.failsafe is None and agent.motor.armed and agent.motor.pos.sum() > 0
+
+
+def test_drivers_that_never_arm_are_a_failsafe():
     clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(20.0, 0.0))
     agent.motor.silent = True
     agent.arm()
     agent.set_mode(AgentMode.FORMATION)
-    run(clock, [agent], 0.15)
-    assert agent.failsafe is None
-    run(clock, [agent], 0.2)
-    assert agent.failsafe == "driver feedback lost"
+    run(clock, [agent], 5.5)
+    assert agent.failsafe == "drivers not armed within 5 s (no feedback)"

@@ -16,6 +16,9 @@ followed by the body of its kind:
   flags u8 (StateFlags), 6 reserved zero bytes.
 * OBSTACLES (``.../robot/<id>/obstacles``): count u16, then count x (cx, cy, r) f32 [m].
 * TRUTH (``.../robot/<id>/truth``, SITL only): x, y, theta, v, u as f64.
+* WHEELS (``.../robot/<id>/wheels``, multi-host SITL only): the emulated drivers' wheel
+  positions [rev] and actual speeds [rev/s], right then left, 4 x f64, for a world
+  simulated on another host.
 * MISSION (``.../mission``): epoch f64 [s, UNIX time], center0 2 x f64 [m], velocity 2 x f32
   [m/s], omega f32 [rad/s], count u16, then count x (robot_id u16, offset_x f32, offset_y f32).
 
@@ -37,6 +40,7 @@ VERSION = 1
 HEADER = struct.Struct("<BBHId")
 STATE_BODY = struct.Struct("<7fBB6x")
 TRUTH_BODY = struct.Struct("<5d")
+WHEELS_BODY = struct.Struct("<4d")
 COUNT = struct.Struct("<H")
 CIRCLE = struct.Struct("<3f")
 MISSION_BODY = struct.Struct("<d2d2ffH")
@@ -48,6 +52,7 @@ class PayloadKind(enum.IntEnum):
     OBSTACLES = 2
     TRUTH = 3
     MISSION = 4
+    WHEELS = 5
 
 
 class StateFlags(enum.IntFlag):
@@ -205,6 +210,34 @@ class TruthMsg:
         _exact(data, cls.SIZE)
         values = TRUTH_BODY.unpack_from(data, HEADER.size)
         _finite(values, "truth")
+        return cls(h.robot_id, h.seq, h.stamp, *values)
+
+
+@dataclass(frozen=True)
+class WheelsMsg:
+    """One robot's emulated wheels (for a world simulated on another host)."""
+
+    robot_id: int
+    seq: int
+    stamp: float
+    right_pos: float  # rev
+    left_pos: float   # rev
+    right_vel: float  # rev/s
+    left_vel: float   # rev/s
+
+    SIZE = HEADER.size + WHEELS_BODY.size
+
+    def encode(self) -> bytes:
+        return (_pack_header(PayloadKind.WHEELS, self.robot_id, self.seq, self.stamp)
+                + WHEELS_BODY.pack(self.right_pos, self.left_pos, self.right_vel,
+                                   self.left_vel))
+
+    @classmethod
+    def decode(cls, data: bytes) -> "WheelsMsg":
+        h = _header(data, PayloadKind.WHEELS)
+        _exact(data, cls.SIZE)
+        values = WHEELS_BODY.unpack_from(data, HEADER.size)
+        _finite(values, "wheels")
         return cls(h.robot_id, h.seq, h.stamp, *values)
 
 

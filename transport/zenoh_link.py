@@ -6,6 +6,7 @@ Key space (prefix ``boundswarm/<swarm>``)::
     robot/<id>             liveliness token while the agent runs
     robot/<id>/obstacles   obstacle detections for that robot (ObstaclesMsg)
     robot/<id>/truth       ground truth pose, SITL only (TruthMsg)
+    robot/<id>/wheels      emulated drivers' wheel speeds, multi-host SITL only (WheelsMsg)
     mission                formation and epoch (MissionMsg)
 
 Receiving never blocks the control loop: samples wait in bounded rings filled by zenoh's
@@ -96,6 +97,9 @@ class Keys:
 
     def truth(self, robot_id: int | str) -> str:
         return f"{self.prefix}/robot/{robot_id}/truth"
+
+    def wheels(self, robot_id: int | str) -> str:
+        return f"{self.prefix}/robot/{robot_id}/wheels"
 
     @property
     def mission(self) -> str:
