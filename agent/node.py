@@ -90,8 +90,10 @@ class Agent:
 
     # --- commands (from the process, a ground station or autostart) ---------------------
     def arm(self) -> None:
-        """Request closed loop; the request is repeated until both drivers report it (they
-        may boot after the robot computer), for at most ``arm_timeout``."""
+        """Clear the drivers' errors and request closed loop (an explicit request); the
+        request alone is repeated until both drivers report it (they may boot after the
+        robot computer), for at most ``arm_timeout``."""
+        self.motor.clear_errors()
         self.motor.arm()
         self.failsafe = None
         self._armed_at = self._arm_sent = self.clock.monotonic()

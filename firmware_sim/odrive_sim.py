@@ -60,8 +60,7 @@ class EmulatedAxis:
             if self.error:
                 log.info("closed loop refused: error %s", AxisError(self.error))
                 return
-            self.state = AxisState.CLOSED_LOOP_CONTROL
-            self.setpoint = 0.0
+            self.state = AxisState.CLOSED_LOOP_CONTROL    # keeps input_vel, as firmware does
             self._since_input = 0.0
         elif requested == AxisState.IDLE:
             self.state = AxisState.IDLE
@@ -87,7 +86,7 @@ class EmulatedAxis:
         before = self.vel
         if self.state == AxisState.CLOSED_LOOP_CONTROL:
             self._since_input += dt
-            if self.watchdog and self._since_input > self.watchdog:
+            if self.watchdog and self._since_input > self.watchdog + 1e-9:
                 self.error |= AxisError.WATCHDOG_TIMER_EXPIRED
                 self.state = AxisState.IDLE
                 self.watchdog_trips += 1

@@ -98,3 +98,19 @@ def test_host_and_drivers_in_two_processes_over_udp_multicast():
             child.kill()
             child.wait()
     assert child.returncode in (0, -15), child.stdout.read().decode()
+
+
+def test_a_stray_datagram_on_the_bus_port_is_skipped_not_fatal():
+    port = free_udp_port()
+    bus = open_bus("udp_multicast", "ff11::b5:8", port=port)
+    peer = open_bus("udp_multicast", "ff11::b5:8", port=port)
+    try:
+        with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
+            s.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, 0)
+            s.sendto(b"not a CAN frame", ("ff11::b5:8", port))
+        peer.send(can.Message(arbitration_id=0x02D, data=bytes(8), is_extended_id=False))
+        got = bus.recv(2.0)
+        assert got is not None and got.arbitration_id == 0x02D and bus.malformed == 1
+    finally:
+        bus.shutdown()
+        peer.shutdown()

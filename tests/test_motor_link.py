@@ -89,7 +89,8 @@ def test_watchdog_trips_when_commands_stop_and_rearming_recovers(rig):
     fb = rig.host.feedback()
     assert "right: WATCHDOG_TIMER_EXPIRED" in fb.errors and not fb.closed_loop
     assert abs(fb.vel_rev_s[0]) < 4.0                  # coasting down, not driven
-    rig.host.arm()                                     # clears errors, closed loop again
+    rig.host.clear_errors()
+    rig.host.arm()                                     # closed loop again
     rig.run(0.2, command=(2.0, 2.0))
     fb = rig.host.feedback()
     assert fb.errors == () and fb.closed_loop and fb.vel_rev_s == pytest.approx((2.0, 2.0))
@@ -108,6 +109,7 @@ def test_estop_and_disarm(rig):
     rig.run(0.12)
     fb = rig.host.feedback()
     assert "left: ESTOP_REQUESTED" in fb.errors
+    rig.host.clear_errors()
     rig.host.arm()
     rig.run(0.05, command=(1.0, 1.0))
     rig.host.disarm()
@@ -172,3 +174,21 @@ def test_dropped_and_delayed_frames():
 def test_frames_sent_by_the_host_are_valid_for_any_peer():
     msg = encode(0, Cmd.SET_AXIS_STATE, Axis_Requested_State=AxisState.CLOSED_LOOP_CONTROL)
     assert msg.data[:4] == bytes([8, 0, 0, 0])
+
+
+def test_non_finite_commands_never_reach_the_bus(rig):
+    rig.host.arm()
+    rig.run(0.05, command=(float("nan"), 1.0))
+    assert rig.host.ignored["nonfinite_command"] >= 1
+    assert rig.drivers.axes[1].setpoint == 0.0 and rig.drivers.ignored["nonfinite"] == 0
+
+
+def test_arming_does_not_clear_a_latched_estop(rig):
+    rig.host.arm()
+    rig.run(0.05, command=(1.0, 1.0))
+    rig.host.estop()
+    rig.run(0.05)
+    rig.host.arm()                                     # no clear_errors: stays latched
+    rig.run(0.15, command=(1.0, 1.0))
+    fb = rig.host.feedback()
+    assert "left: ESTOP_REQUESTED" in fb.errors and not fb.closed_loop

@@ -50,6 +50,7 @@ class EchoFilteredBus(can.BusABC):
         self.horizon = horizon
         self._sent: deque = deque()
         self.echoes_dropped = 0
+        self.malformed = 0
         super().__init__(channel=inner.channel_info)
         self.channel_info = inner.channel_info
 
@@ -66,7 +67,13 @@ class EchoFilteredBus(can.BusABC):
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
-            msg = self.inner.recv(remaining)
+            try:
+                msg = self.inner.recv(remaining)
+            except can.CanOperationError as exc:
+                if isinstance(exc.__cause__, OSError):
+                    raise
+                self.malformed += 1            # a datagram that is not a CAN frame
+                continue
             if msg is None:
                 return None, False
             now = time.monotonic()

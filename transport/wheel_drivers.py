@@ -9,6 +9,7 @@ velocity, then IDLE. Frames that do not decode are ignored and counted.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections import Counter
 from dataclasses import dataclass
@@ -65,7 +66,8 @@ class WheelDrivers:
             self._send(encode(node, cmd, **signals))
 
     def arm(self) -> None:
-        self.clear_errors()
+        """Velocity mode with ramp, limits, zero set-point, closed loop. Errors are not
+        cleared here: a latched error (Estop, watchdog) needs :meth:`clear_errors`."""
         self._both(Cmd.SET_CONTROLLER_MODE, Control_Mode=ControlMode.VELOCITY_CONTROL,
                    Input_Mode=InputMode.VEL_RAMP)
         self._both(Cmd.SET_LIMITS, Velocity_Limit=self.vel_limit,
@@ -78,6 +80,10 @@ class WheelDrivers:
         self._both(Cmd.SET_AXIS_STATE, Axis_Requested_State=AxisState.IDLE)
 
     def command(self, right_rev_s: float, left_rev_s: float) -> None:
+        """Wheel velocity set-points [rev/s]; a non-finite one is sent as zero and counted."""
+        if not (math.isfinite(right_rev_s) and math.isfinite(left_rev_s)):
+            self.ignored["nonfinite_command"] += 1
+            right_rev_s = left_rev_s = 0.0
         self._send(encode(self.right_node, Cmd.SET_INPUT_VEL, Input_Vel=right_rev_s,
                           Input_Torque_FF=0.0))
         self._send(encode(self.left_node, Cmd.SET_INPUT_VEL, Input_Vel=left_rev_s,
