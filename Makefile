@@ -6,16 +6,17 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo sim test bench clean system-packages
 
-# Debian packages for the tests of the real socketcan path (User-Mode Linux guest with vcan)
-# and candump; installed when missing if we are root with apt-get, otherwise those tests skip
+# Debian packages for the tests of the real socketcan path (User-Mode Linux guest with vcan),
+# candump, and nft for link faults between hosts; installed when missing if we are root with
+# apt-get, otherwise those tests skip
 # and say why.
-SYSTEM_TOOLS := linux insmod candump
+SYSTEM_TOOLS := linux insmod candump nft
 system-packages:
 	@missing=0; for t in $(SYSTEM_TOOLS); do command -v $$t >/dev/null || missing=1; done; \
 	if [ $$missing = 1 ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
-	    echo "installing user-mode-linux kmod can-utils (Debian)"; \
-	    apt-get update -qq && apt-get install -y -qq user-mode-linux kmod can-utils >/dev/null \
+	    echo "installing user-mode-linux kmod can-utils nftables (Debian)"; \
+	    apt-get update -qq && apt-get install -y -qq user-mode-linux kmod can-utils nftables >/dev/null \
 	      || echo "note: could not install UML; socketcan tests will skip"; \
 	  else echo "note: UML/can-utils missing and not root; socketcan tests will skip"; fi; \
 	fi
