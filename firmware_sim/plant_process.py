@@ -87,9 +87,32 @@ class RemoteWheels:
         """The cache is closed by its owner."""
 
 
+def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: float,
+               clock: SystemClock) -> dict:
+    """Publish truth and obstacles of ``robots`` while moving them in real time until a
+    signal; the physics steps by the time that really passed (a late tick must not slow the
+    world). Returns the loop statistics."""
+    publishers = {(kind, rb.robot_id): session.declare_publisher(getattr(keys, kind)(rb.robot_id))
+                  for rb in robots for kind in ("truth", "obstacles")}
+    plant = SitlPlant(robots, scenario.robot, scenario.obstacles, scenario.sensing_range,
+                      lambda kind, rid, data: publishers[(kind, rid)].put(data))
+    loop = FixedRateLoop(dt, clock)
+    _stop_on_signals(loop.stop)
+    last = [clock.monotonic()]
+
+    def tick(k: int, deadline: float) -> None:
+        now = clock.monotonic()
+        step, last[0] = min(now - last[0], MAX_STEP), now
+        plant.step(step, now, clock.wall())
+
+    loop.run(tick)
+    return loop.stats.summary()
+
+
 def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
-    """The world of a multi-host SITL: robots moved by the wheel speeds their remote drivers
-    publish; truth and obstacle detections published. Runs until a signal."""
+    """The world of a multi-host SITL: robots roll as the wheels of their remote drivers
+    turn (published positions); truth and obstacle detections published. Runs until a
+    signal."""
     clock = SystemClock()
     keys = Keys(swarm)
     session = open_session(conf, "the world")
@@ -99,22 +122,9 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
         robots = [PlantRobot(int(rid), np.array(pose, float),
                              RemoteWheels(cache, int(rid), clock.wall))
                   for rid, pose in zip(scenario.ids, scenario.poses)]
-        publishers = {(kind, rb.robot_id): session.declare_publisher(
-            getattr(keys, kind)(rb.robot_id)) for rb in robots for kind in ("truth", "obstacles")}
-        plant = SitlPlant(robots, scenario.robot, scenario.obstacles, scenario.sensing_range,
-                          lambda kind, rid, data: publishers[(kind, rid)].put(data))
-        loop = FixedRateLoop(dt, clock)
-        _stop_on_signals(loop.stop)
-        last = [clock.monotonic()]
-
-        def tick(k: int, deadline: float) -> None:
-            now = clock.monotonic()
-            step, last[0] = min(now - last[0], MAX_STEP), now
-            plant.step(step, now, clock.wall())
-
-        loop.run(tick)
+        stats = _run_plant(session, keys, robots, scenario, dt, clock)
         cache.close()
-        return loop.stats.summary()
+        return stats
     finally:
         session.close()
 
@@ -137,22 +147,7 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
             drivers.configure(vel_limit=r.wheel_speed_limit, ramp=r.wheel_ramp,
                               watchdog=watchdog)
             robots.append(PlantRobot(rid, np.array(scenario.poses[index[rid]], float), drivers))
-        publishers = {(kind, rid): session.declare_publisher(getattr(keys, kind)(rid))
-                      for rid in robot_ids for kind in ("truth", "obstacles")}
-        plant = SitlPlant(robots, r, scenario.obstacles, scenario.sensing_range,
-                          lambda kind, rid, data: publishers[(kind, rid)].put(data))
-        loop = FixedRateLoop(dt, clock)
-        _stop_on_signals(loop.stop)
-        last = [clock.monotonic()]
-
-        def tick(k: int, deadline: float) -> None:
-            # integrate the time that really passed (a late tick must not slow the world)
-            now = clock.monotonic()
-            step, last[0] = min(now - last[0], MAX_STEP), now
-            plant.step(step, now, clock.wall())
-
-        loop.run(tick)
-        stats = loop.stats.summary()
+        stats = _run_plant(session, keys, robots, scenario, dt, clock)
         stats["cpu_seconds"] = time.process_time()
         stats["wall_seconds"] = time.monotonic() - t0
         stats["watchdog_trips"] = {rb.robot_id: sum(a.watchdog_trips

@@ -3,7 +3,8 @@
 This machine's kernel has no CAN support; Debian's ``user-mode-linux`` package ships a
 kernel that runs as an ordinary process and has vcan, can-raw and sch_netem as modules.
 The guest sees the host's root read-only (hostfs), so the project's venv runs inside
-unchanged, and one host folder read-write (``$UML_WORK``, the same path inside) for outputs. The guest has
+unchanged (the host's /tmp too, so a checkout there works), and one host folder read-write
+(``$UML_WORK``, the same path inside, also ``TMPDIR``) for outputs. The guest has
 no network interface but loopback: nothing it does leaves the machine.
 
 Used by the tests of the socketcan path and by ``bench/``; needs the Debian packages
@@ -26,11 +27,9 @@ DONE = "UML-SCRIPT-EXIT"
 INIT = """#!/bin/sh
 mount -t proc proc /proc
 mount -t sysfs sys /sys
-mount -t tmpfs tmpfs /tmp
 mount -t tmpfs tmpfs /run
-mkdir -p {work} 2>/dev/null
 mount -t hostfs -o {work} none {work}
-export PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/tmp PYTHONDONTWRITEBYTECODE=1
+export PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME={work} TMPDIR={work} PYTHONDONTWRITEBYTECODE=1
 M=/usr/lib/uml/modules/$(uname -r)/kernel
 for m in {modules}; do insmod $M/$m || echo "uml: insmod $m failed"; done
 ip link set up lo
