@@ -7,22 +7,55 @@ closed. Loop and agent statistics are written as JSON when asked.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import signal
 import time
 from pathlib import Path
 
+from agent.config import ControlParams
 from agent.loop import FixedRateLoop, SystemClock
 from agent.node import Agent, AgentMode
 from agent.settings import AgentSettings
 from agent.systemd import Notifier
 from transport.canbus import open_bus
+from transport.mavlink_link import VehicleState, open_link
 from transport.wheel_drivers import WheelDrivers
 from transport.zenoh_link import (Keys, SwarmLink, config_from_file, open_session,
                                   session_config)
 
 log = logging.getLogger(__name__)
+
+
+class AgentVehicle:
+    """The agent as the vehicle a ground station commands (transport.mavlink_link's
+    VehicleControl): commands and parameter writes apply at the next period."""
+
+    def __init__(self, agent: Agent):
+        self.agent = agent
+
+    def state(self) -> VehicleState:
+        a = self.agent
+        x, y, theta = (float(c) for c in a.odometry.pose)
+        return VehicleState(a.mode, a.failsafe, x, y, theta, *a.command)
+
+    def arm(self) -> str | None:
+        self.agent.arm()
+        return None
+
+    def disarm(self) -> str | None:
+        self.agent.disarm()
+        return None
+
+    def set_mode(self, mode: AgentMode) -> str | None:
+        return self.agent.set_mode(mode)
+
+    def params(self) -> ControlParams:
+        return self.agent.s.control
+
+    def apply_params(self, params: ControlParams) -> None:
+        self.agent.s = dataclasses.replace(self.agent.s, control=params)
 
 
 def run_agent(settings: AgentSettings, stats_path: Path | None = None,
@@ -32,7 +65,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
     clock = SystemClock()
     t0 = time.monotonic()
     bus = open_bus(s.can.interface, s.can.channel, port=s.can.port, bitrate=s.can.bitrate)
-    session = swarm = None
+    session = swarm = link = None
     try:
         motor = WheelDrivers(bus, s.can.left_node, s.can.right_node,
                              vel_limit=s.robot.wheel_speed_limit, clock=clock.monotonic)
@@ -41,6 +74,8 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         session = open_session(conf, f"agent {s.robot_id}")
         swarm = SwarmLink(session, Keys(s.swarm), s.robot_id, clock.wall)
         agent = Agent(s, motor, swarm, clock)
+        link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
+                         clock.wall)
         loop = FixedRateLoop(s.control.period, clock)
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: loop.stop())
@@ -53,6 +88,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
 
         def tick(k: int, deadline: float) -> None:
             agent.tick(k, deadline)
+            link.poll(clock.monotonic())          # bounded, never blocks
             fb = agent.last_feedback
             if fb is not None and fb.closed_loop and agent.failsafe is None:
                 notifier.ready(f"robot {s.robot_id} armed")
@@ -69,11 +105,14 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
                  "cpu_seconds": time.process_time(), "wall_seconds": time.monotonic() - t0,
                  "agent": agent.counters.summary(), "zenoh": swarm.counters(),
                  "can": {"sent": motor.sent, "ignored": dict(motor.ignored)},
+                 "mavlink": link.counter_summary(),
                  "failsafe": agent.failsafe}
         if stats_path is not None:
             stats_path.write_text(json.dumps(stats, indent=2) + "\n")
         return stats
     finally:
+        if link is not None:
+            link.close()
         if swarm is not None:
             swarm.close()
         if session is not None:

@@ -13,19 +13,24 @@
     [zenoh]                         # mode ("client" or "peer"), connect = [...], listen = [...]
     [timeouts]                      # feedback (0.2 s), staleness (0.5 s), arm (5 s)
     [sensing]                       # range (m, default 2c)
+    [mavlink]                       # url (udpout:127.0.0.1:14550), origin [lat, lon, alt],
+                                    # gcs_failsafe, gcs_timeout (1.5 s), signing_key_file
 
 Every problem raises :class:`agent.config.ConfigError` naming the file and the field.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agent.config import ControlParams, RobotParams, TableReader, from_table, load_toml
+from agent.config import (ConfigError, ControlParams, RobotParams, TableReader, from_table,
+                          load_toml)
+from transport.mavlink_io import parse_url
 
 TOP_KEYS = {"robot_id", "swarm", "initial_pose", "autostart", "control", "robot", "can",
-            "zenoh", "timeouts", "sensing"}
+            "zenoh", "timeouts", "sensing", "mavlink"}
 
 
 @dataclass(frozen=True)
@@ -50,6 +55,56 @@ class ZenohSettings:
 
 
 @dataclass(frozen=True)
+class MavlinkSettings:
+    """The ``[mavlink]`` table of the agent config."""
+
+    url: str = "udpout:127.0.0.1:14550"       # see transport.mavlink_io
+    origin: tuple[float, float, float] = (-35.363261, 149.16523, 584.0)
+    #   geodetic origin of the world frame: latitude [deg], longitude [deg], altitude AMSL [m]
+    #   (default: ArduPilot SITL's home, so the usual ground-station setups line up)
+    gcs_failsafe: bool = False                # HOLD when no GCS heartbeat for gcs_timeout
+    gcs_timeout: float = 1.5                  # s
+    signing_key_file: str | None = None       # 32 raw bytes or a passphrase; None: no signing
+
+    def __post_init__(self) -> None:
+        lat, lon, alt = self.origin
+        if not (math.isfinite(lat) and abs(lat) <= 85.0):
+            raise ConfigError(f"mavlink.origin: latitude must be within +-85 deg (the local "
+                              f"tangent plane fails near the poles), got {lat!r}")
+        if not (math.isfinite(lon) and -180.0 <= lon <= 180.0):
+            raise ConfigError(f"mavlink.origin: longitude must be in [-180, 180] deg, "
+                              f"got {lon!r}")
+        if not math.isfinite(alt):
+            raise ConfigError(f"mavlink.origin: altitude must be finite [m], got {alt!r}")
+        if not (math.isfinite(self.gcs_timeout) and self.gcs_timeout > 0):
+            raise ConfigError(f"mavlink.gcs_timeout: must be > 0 [s], got {self.gcs_timeout!r}")
+        try:
+            parse_url(self.url)
+        except ValueError as exc:
+            raise ConfigError(f"mavlink.url: {exc}") from None
+
+    @classmethod
+    def from_table(cls, table: dict, where: str) -> MavlinkSettings:
+        """From a TOML table; errors name ``where`` and the field."""
+        rd = TableReader(where)
+        rd.only(table, {"url", "origin", "gcs_failsafe", "gcs_timeout", "signing_key_file"},
+                "[mavlink]")
+        failsafe = table.get("gcs_failsafe", False)
+        if not isinstance(failsafe, bool):
+            raise rd.fail("[mavlink] gcs_failsafe", f"expected true or false, got {failsafe!r}")
+        url = rd.string(table, "url", "[mavlink] url", cls.url)
+        origin = rd.vector(table, "origin", "[mavlink] origin", 3, cls.origin)
+        timeout = rd.number(table, "gcs_timeout", "[mavlink] gcs_timeout", 1.5, positive=True)
+        key = (rd.string(table, "signing_key_file", "[mavlink] signing_key_file")
+               if "signing_key_file" in table else None)
+        try:
+            return cls(url=url, origin=origin, gcs_failsafe=failsafe, gcs_timeout=timeout,
+                       signing_key_file=key)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+
+
+@dataclass(frozen=True)
 class AgentSettings:
     robot_id: int
     swarm: str
@@ -63,6 +118,7 @@ class AgentSettings:
     arm_timeout: float = 5.0          # s for both drivers to enter closed loop after arming
     staleness: float = 0.5            # s, neighbour kept as a static obstacle beyond this
     sensing_range: float = 8.0        # m
+    mavlink: MavlinkSettings = field(default_factory=MavlinkSettings)
 
 
 def parse_settings(doc: dict, where: str) -> AgentSettings:
@@ -122,7 +178,7 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
         initial_pose=rd.vector(doc, "initial_pose", "initial_pose", 3),
         control=control, robot=robot, can=can, zenoh=zenoh, autostart=autostart,
         feedback_timeout=feedback, staleness=staleness, sensing_range=sensing,
-        arm_timeout=arm)
+        arm_timeout=arm, mavlink=MavlinkSettings.from_table(rd.table(doc, "mavlink"), where))
 
 
 def load_settings(path: str | Path) -> AgentSettings:
@@ -134,6 +190,13 @@ def load_settings(path: str | Path) -> AgentSettings:
         if not zpath.is_file():
             raise TableReader(str(path)).fail("[zenoh] config", f"no such file {zpath}")
         s = dataclasses.replace(s, zenoh=dataclasses.replace(s.zenoh, config=str(zpath)))
+    if s.mavlink.signing_key_file is not None:
+        kpath = path.parent / s.mavlink.signing_key_file
+        if not kpath.is_file():
+            raise TableReader(str(path)).fail("[mavlink] signing_key_file",
+                                              f"no such file {kpath}")
+        s = dataclasses.replace(s, mavlink=dataclasses.replace(s.mavlink,
+                                                               signing_key_file=str(kpath)))
     return s
 
 
@@ -158,6 +221,8 @@ def settings_to_toml(s: AgentSettings) -> str:
               "zenoh": {k: v for k, v in dataclasses.asdict(s.zenoh).items() if v is not None},
               "timeouts": {"feedback": s.feedback_timeout, "staleness": s.staleness,
                            "arm": s.arm_timeout},
+              "mavlink": {k: v for k, v in dataclasses.asdict(s.mavlink).items()
+                          if v is not None},
               "sensing": {"range": s.sensing_range}}
     for name, table in tables.items():
         lines.append(f"\n[{name}]")

@@ -35,7 +35,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agent.config import TableReader, load_toml
-from agent.settings import AgentSettings, CanSettings, ZenohSettings, settings_to_toml
+from agent.settings import (AgentSettings, CanSettings, MavlinkSettings, ZenohSettings,
+                            settings_to_toml)
 from hil.certs import SwarmCA, write_private
 from hil.scenario import load_scenario
 
@@ -251,7 +252,8 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
             control=sc.control, robot=sc.robot,
             can=CanSettings(interface="socketcan", channel=r.can_interface, bitrate=r.bitrate),
             zenoh=ZenohSettings(mode="client", connect=(), config="zenoh.json5"),
-            autostart=True, sensing_range=sc.sensing_range)
+            autostart=True, sensing_range=sc.sensing_range,
+            mavlink=MavlinkSettings(url=manifest.mavlink, signing_key_file="mavlink.key"))
         (b / "agent.toml").write_text(settings_to_toml(settings))
         (b / "boundswarm-agent.service").write_text(UNIT.format(
             id=r.id, etc=etc, prefix=prefix, can=r.can_interface, bitrate=r.bitrate))

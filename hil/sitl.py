@@ -214,7 +214,8 @@ def _write_manifest(out: Path, sc: Scenario, settings: list[AgentSettings], endp
     robots = {str(s.robot_id): {"can": {"interface": s.can.interface, "channel": s.can.channel,
                                         "port": s.can.port, "left_node": s.can.left_node,
                                         "right_node": s.can.right_node},
-                                "zenoh": endpoint, "mavlink": {"sysid": s.robot_id},
+                                "zenoh": endpoint,
+                                "mavlink": {"sysid": s.robot_id, "url": s.mavlink.url},
                                 "config": f"config/robot_{s.robot_id}.toml",
                                 "pid": pids.get(f"agent_{s.robot_id}")}
               for s in settings}
