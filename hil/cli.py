@@ -76,7 +76,8 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     out = Path(args.out)
     opts = SitlOptions(can_interface=args.can_interface, can_channel=args.can_channel,
                        can_base_port=args.can_base_port,
-                       robots_per_plant=args.robots_per_plant, live=not args.no_live)
+                       robots_per_plant=args.robots_per_plant, live=not args.no_live,
+                       gcs_port=args.gcs_port)
     started = time.perf_counter()
     try:
         run = run_sitl(sc, out, opts, console)
@@ -331,6 +332,8 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--robots-per-plant", type=int, default=0,
                       help="robots hosted by one plant process (0: all in one)")
     sitl.add_argument("--no-live", action="store_true", help="no live status table")
+    sitl.add_argument("--gcs-port", type=int, default=14550,
+                      help="UDP port of the ground station on 127.0.0.1 (0: no MAVLink)")
     sitl.set_defaults(func=cmd_sitl)
 
     agent = sub.add_parser("agent", help="one agent process (what runs on a robot computer)")

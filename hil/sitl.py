@@ -27,7 +27,9 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from agent.settings import AgentSettings, CanSettings, ZenohSettings, settings_to_toml
+from agent.settings import (AgentSettings, CanSettings, MavlinkSettings, ZenohSettings,
+                            settings_to_toml)
+from hil.mavlink_router import MavlinkRouter
 from hil.processes import Children, wait_until
 from hil.recorder import Recorder
 from hil.scenario import Scenario
@@ -50,6 +52,7 @@ class SitlOptions:
     can_base_port: int = 43200          # udp_multicast: robot ID's bus on port base + ID
     robots_per_plant: int = 0           # 0: one plant process hosts every robot
     zenoh_port: int | None = None       # router port on 127.0.0.1 (default: a free one)
+    gcs_port: int = 14550               # ground station's UDP port on 127.0.0.1 (0: no MAVLink)
     startup_timeout: float = 40.0       # s
     lead_time: float = 1.5              # s between the mission message and its epoch
     live: bool = True                   # live status table on a terminal
@@ -71,12 +74,18 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def _swarm_name(sc: Scenario) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in sc.name) or "swarm"
 
 
 def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
-                   opts: SitlOptions) -> AgentSettings:
+                   opts: SitlOptions, mavlink_port: int) -> AgentSettings:
     rid = int(sc.ids[index])
     if opts.can_interface == "udp_multicast":
         can = CanSettings(interface="udp_multicast", channel=opts.can_channel or "ff11::b5:1",
@@ -87,7 +96,8 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
     return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=tuple(map(float, sc.poses[index])),
                          control=sc.control, robot=sc.robot, can=can,
                          zenoh=ZenohSettings(mode="client", connect=(endpoint,)),
-                         autostart=True, sensing_range=sc.sensing_range)
+                         autostart=True, sensing_range=sc.sensing_range,
+                         mavlink=MavlinkSettings(url=f"udpout:127.0.0.1:{mavlink_port}"))
 
 
 def _status_table(sc: Scenario, states: dict, truth: dict, presence: frozenset,
@@ -130,7 +140,17 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
         opened += [truth, states]
         config_dir = out / "config"
         config_dir.mkdir(exist_ok=True)
-        settings = [agent_settings(sc, i, swarm, endpoint, opts) for i in range(len(sc.ids))]
+        if opts.gcs_port:
+            router_mav = MavlinkRouter(free_udp_port(), opts.gcs_port).start()
+            opened.append(router_mav)
+            mav_port = router_mav.agents_port
+            console.print(f"MAVLink: every agent (system id = robot id) on udp 127.0.0.1:"
+                          f"{opts.gcs_port}; e.g. mavproxy.py --master=udpin:127.0.0.1:"
+                          f"{opts.gcs_port}, or QGroundControl's default UDP link")
+        else:
+            mav_port = free_udp_port()               # nobody listens: telemetry is dropped
+        settings = [agent_settings(sc, i, swarm, endpoint, opts, mav_port)
+                    for i in range(len(sc.ids))]
         for s in settings:
             (config_dir / f"robot_{s.robot_id}.toml").write_text(settings_to_toml(s))
         _write_manifest(out, sc, settings, endpoint, swarm)

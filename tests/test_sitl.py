@@ -6,6 +6,7 @@ process it started (by PID, from the run manifest).
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -155,3 +156,39 @@ def test_bad_agent_config_is_refused_naming_the_field(tmp_path):
                           cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert str(bad) in proc.stderr and "robot_id" in proc.stderr
+
+
+def test_one_ground_station_port_reaches_every_agent(launch):
+    """A pymavlink ground station on one UDP port sees every agent and commands robot 2
+    alone (the launcher's router routes by target system)."""
+    from pymavlink import mavutil
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    sock.close()
+    gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
+    try:
+        run = launch("sitl_small.toml", "--gcs-port", str(port))
+        seen = set()
+        end = time.monotonic() + 60
+        while seen != {1, 2, 3} and time.monotonic() < end:
+            msg = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=1)
+            if msg is not None:
+                seen.add(msg.get_srcSystem())
+        assert seen == {1, 2, 3}
+        acks = {}
+        for _ in range(5):
+            gcs.mav.command_long_send(2, 1, mavutil.mavlink.MAV_CMD_DO_SET_MODE, 0,
+                                      mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0,
+                                      0, 0, 0, 0, 0)
+            msg = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=2)
+            if msg is not None:
+                acks[msg.get_srcSystem()] = msg.result
+                break
+        assert acks == {2: mavutil.mavlink.MAV_RESULT_ACCEPTED}
+        code, out = run.wait(timeout=90)
+        assert code == 0, out
+        m = json.loads((run.out / "metrics.json").read_text())
+        assert m["collisions"] == 0 and m["stuck_robots"] == [2]   # robot 2 held still
+    finally:
+        gcs.close()
