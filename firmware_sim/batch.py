@@ -17,7 +17,8 @@ from agent.config import ControlParams, RobotParams
 from agent.formation import Formation
 from agent.law import LawInput, LawMemory, control_step
 from firmware_sim.metrics import RunMetrics, tolerance
-from firmware_sim.plant import PlantKind, make_plant
+from agent.kinematics import integrate_arc
+from firmware_sim.plant import IdealPlant, PlantKind, make_plant
 from firmware_sim.world import Obstacles, Sensed, Sensing
 
 TRAJECTORY_COLUMNS = ("t", "id", "x", "y", "theta", "v", "u", "mode", "x_d", "y_d")
@@ -117,9 +118,18 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             watch.observe(metrics, t, pose)
         if k == steps:
             break
-        for s in range(1, options.substeps + 1):
-            pose, _, _ = plant.step(pose, out.v, out.u, dt)
-            watch.observe(metrics, t + s * dt, pose)
+        if isinstance(plant, IdealPlant):
+            # exact arcs: the substeps are needed only for the watched robots
+            m = watch.members
+            for s in range(1, options.substeps):
+                sub = integrate_arc(pose[m], out.v[m], out.u[m], s * dt)
+                watch.observe_members(metrics, t + s * dt, sub[:, :2])
+            pose = integrate_arc(pose, out.v, out.u, T)
+            watch.observe(metrics, t + T, pose)
+        else:
+            for s in range(1, options.substeps + 1):
+                pose, _, _ = plant.step(pose, out.v, out.u, dt)
+                watch.observe(metrics, t + s * dt, pose)
         if progress and k % report_every == 0:
             progress(k / steps)
     if progress:
@@ -149,6 +159,10 @@ class _Watch:
         self.obs_idx = seen.obs_idx[self.robots]
         self.obs_valid = seen.obs_valid[self.robots]
         self.obstacles = obstacles
+        # the robots involved, and the pairs and robots in their local numbering
+        self.members = np.unique(np.concatenate([self.pairs.ravel(), self.robots]))
+        self._pairs = np.searchsorted(self.members, self.pairs)
+        self._robots = np.searchsorted(self.members, self.robots)
 
     @staticmethod
     def _clear(pos, idx, valid, obstacles) -> np.ndarray:
@@ -157,6 +171,11 @@ class _Watch:
                         np.inf)
 
     def observe(self, metrics: RunMetrics, t: float, pose: np.ndarray) -> None:
-        pos = pose[:, :2]
-        clear = self._clear(pos[self.robots], self.obs_idx, self.obs_valid, self.obstacles)
-        metrics.observe_geometry(t, pos, self.pairs, self.robots, clear)
+        """Check the swarm's poses (N, 3) at time t."""
+        self.observe_members(metrics, t, pose[self.members, :2])
+
+    def observe_members(self, metrics: RunMetrics, t: float, pos: np.ndarray) -> None:
+        """Check the positions (M, 2) of :attr:`members` only at time t."""
+        clear = self._clear(pos[self._robots], self.obs_idx, self.obs_valid, self.obstacles)
+        metrics.observe_geometry(t, pos, self._pairs.reshape(-1, 2), self._robots, clear,
+                                 index=self.members)

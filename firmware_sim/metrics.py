@@ -46,10 +46,13 @@ class RunMetrics:
     _final_within: np.ndarray | None = None
 
     def observe_geometry(self, t: float, pos: np.ndarray, pairs: np.ndarray,
-                         robots: np.ndarray, clearance: np.ndarray) -> None:
+                         robots: np.ndarray, clearance: np.ndarray,
+                         index: np.ndarray | None = None) -> None:
         """Robot positions (N, 2) at time t [s]; ``pairs`` (P, 2) of robots to check (every
         pair that could be the closest or closer than a); ``clearance`` (R, K) [m] from
-        robots ``robots`` (R,) to obstacle surfaces, inf where there is none."""
+        robots ``robots`` (R,) to obstacle surfaces, inf where there is none. ``index``
+        maps the rows of ``pos`` to the swarm's robots when ``pos`` holds only some."""
+        ids = self.ids if index is None else self.ids[index]
         d = np.hypot(*(pos[pairs[:, 0]] - pos[pairs[:, 1]]).T)
         dmin = float(d.min()) if len(d) else math.inf
         cmin = float(clearance.min()) if clearance.size else math.inf
@@ -57,10 +60,10 @@ class RunMetrics:
         self.min_obstacle_clearance = min(self.min_obstacle_clearance, cmin)
         if dmin < self.a:
             for i, j in pairs[d < self.a]:
-                self.colliding_pairs.add((int(self.ids[i]), int(self.ids[j])))
+                self.colliding_pairs.add((int(ids[i]), int(ids[j])))
         if cmin < 0.0:
             inside = robots[(clearance < 0.0).any(axis=1)]
-            self.robots_in_obstacles.update(int(self.ids[i]) for i in inside)
+            self.robots_in_obstacles.update(int(ids[i]) for i in inside)
         self.geometry_t.append(t)
         self.geometry_dmin.append(dmin)
         self.geometry_clear.append(cmin)
