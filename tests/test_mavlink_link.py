@@ -310,7 +310,8 @@ def test_commands_for_other_systems_and_broadcasts_are_ignored(make_rig):
     for target in (ROBOT + 1, 0):
         rig.command(mav2.MAV_CMD_COMPONENT_ARM_DISARM, 1, target=target)
         rig.none_of("COMMAND_ACK")
-    rig.gcs.mav.set_mode_send(ROBOT + 1, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1)
+    rig.gcs.mav.set_mode_send(ROBOT + 1, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                              CustomMode.FORMATION)
     rig.gcs.mav.param_set_send(ROBOT + 1, 1, b"BS_K", 1.0, mav2.MAV_PARAM_TYPE_REAL32)
     rig.none_of("COMMAND_ACK")
     assert len(rig.vehicle.calls) == calls and rig.vehicle.mode is AgentMode.DISARMED
@@ -335,12 +336,14 @@ def test_gcs_heartbeat_failsafe_holds_and_refuses_formation(make_rig):
     v.mode = AgentMode.FORMATION                          # e.g. autostart: held again
     rig.step()
     assert v.mode is AgentMode.HOLD
-    rig.gcs.mav.set_mode_send(ROBOT, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1)
+    rig.gcs.mav.set_mode_send(ROBOT, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                              CustomMode.FORMATION)
     assert rig.ack(mav2.MAV_CMD_DO_SET_MODE) == mav2.MAV_RESULT_DENIED
     gcs_heartbeat()
     rig.step()
     assert "GCS heartbeat back" in rig.texts()
-    rig.gcs.mav.set_mode_send(ROBOT, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1)
+    rig.gcs.mav.set_mode_send(ROBOT, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                              CustomMode.FORMATION)
     assert rig.ack(mav2.MAV_CMD_DO_SET_MODE) == mav2.MAV_RESULT_ACCEPTED
     assert v.mode is AgentMode.FORMATION
 
@@ -652,7 +655,8 @@ def test_the_agent_is_commanded_through_the_adapter(make_rig):
     rig = make_rig(vehicle=AgentVehicle(agent))
     rig.command(mav2.MAV_CMD_COMPONENT_ARM_DISARM, 1)
     assert rig.ack(mav2.MAV_CMD_COMPONENT_ARM_DISARM) == mav2.MAV_RESULT_ACCEPTED
-    rig.command(mav2.MAV_CMD_DO_SET_MODE, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1)
+    rig.command(mav2.MAV_CMD_DO_SET_MODE, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                CustomMode.FORMATION)
     assert rig.ack(mav2.MAV_CMD_DO_SET_MODE) == mav2.MAV_RESULT_ACCEPTED
     assert agent.mode is AgentMode.FORMATION
     rig.gcs.mav.param_set_send(ROBOT, 1, b"BS_K_THETA", 2.5, mav2.MAV_PARAM_TYPE_REAL32)

@@ -179,7 +179,7 @@ def test_one_ground_station_port_reaches_every_agent(launch):
         acks = {}
         for _ in range(5):
             gcs.mav.command_long_send(2, 1, mavutil.mavlink.MAV_CMD_DO_SET_MODE, 0,
-                                      mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0,
+                                      mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4,
                                       0, 0, 0, 0, 0)
             msg = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=2)
             if msg is not None:

@@ -31,8 +31,8 @@ frame NED: north = y, east = x, down = 0, yaw = pi/2 - theta wrapped to (-pi, pi
                                                      tangent plane (WGS84 radii at the origin)
 
 HEARTBEAT: type GROUND_ROVER, autopilot GENERIC, base_mode CUSTOM_MODE_ENABLED (+ SAFETY_ARMED
-when armed), custom_mode :class:`CustomMode` (0 HOLD, also reported while disarmed; 1
-FORMATION), system_status CRITICAL during a failsafe, else ACTIVE when armed, STANDBY when not.
+when armed), custom_mode :class:`CustomMode` (4 HOLD, also reported while disarmed; 10
+FORMATION, shown as AUTO), system_status CRITICAL during a failsafe, else ACTIVE when armed, STANDBY when not.
 
 Commands (only those whose target_system is this robot; target_component 0 or 1):
 COMMAND_LONG/COMMAND_INT MAV_CMD_COMPONENT_ARM_DISARM (param1 1 arm, 0 disarm),
@@ -95,10 +95,14 @@ _E2 = 6.69437999014e-3            # first eccentricity squared
 
 
 class CustomMode(enum.IntEnum):
-    """HEARTBEAT.custom_mode and the custom mode of DO_SET_MODE / SET_MODE."""
+    """HEARTBEAT.custom_mode and the custom mode of DO_SET_MODE / SET_MODE.
 
-    HOLD = 0
-    FORMATION = 1
+    Numbered as ArduPilot's Rover modes, which ground stations apply to any GROUND_ROVER:
+    HOLD is HOLD, and FORMATION (the robot follows its mission on its own) shows as AUTO, so
+    ``mode HOLD`` / ``mode AUTO`` in MAVProxy or QGroundControl's mode menu work as is."""
+
+    HOLD = 4
+    FORMATION = 10
 
 
 _AGENT_MODE = {CustomMode.HOLD: AgentMode.HOLD, CustomMode.FORMATION: AgentMode.FORMATION}
