@@ -117,6 +117,11 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     s = metrics["sitl"]
     console.print(f"deadline misses: {s['deadline_misses']}, watchdog trips: "
                   f"{sum(s['watchdog_trips'].values())}, lost: {s['lost_processes'] or 'none'}")
+    if s["deadline_misses"]:
+        console.print(f"[yellow]warning: {s['deadline_misses']} missed control periods: this "
+                      f"machine could not run {len(sc.ids)} agents in real time; late periods "
+                      f"and stale neighbour data eat the braking margin, so the safety of "
+                      f"this run is not representative (fewer robots, or more cores)[/yellow]")
     console.print(f"metrics: {out / run_folder.METRICS}\nfigures: {out / run_folder.FIGURES}/"
                   f"\nrecording: {out / 'run.mcap'} (Foxglove, mcap tools)")
     if metrics["collisions"]:
