@@ -74,10 +74,10 @@ class RemoteWheels:
     def step(self, dt: float) -> None:
         """Nothing to advance: the drivers are remote."""
 
-    def wheel_state(self) -> tuple[float, float, float, float]:
+    def wheel_state(self) -> tuple[float, float, float, float] | None:
         got = self.cache.snapshot().get(self.robot_id)
         if got is None:
-            return 0.0, 0.0, 0.0, 0.0
+            return None          # not heard from yet: the robot stays where it is
         m = got.msg
         if self.clock() - m.stamp > self.stale:
             return m.right_pos, m.left_pos, 0.0, 0.0

@@ -29,8 +29,9 @@ class DriverPair(Protocol):
 
     def service(self, now: float) -> None: ...          # CAN in/out, periodic frames, watchdog
     def step(self, dt: float) -> None: ...              # advance the axes by dt [s]
-    def wheel_state(self) -> tuple[float, float, float, float]: ...
-    # (right, left) positions [rev], then (right, left) actual speeds [rev/s]
+    def wheel_state(self) -> tuple[float, float, float, float] | None: ...
+    # (right, left) positions [rev], then (right, left) actual speeds [rev/s]; None while
+    # nothing is known yet (remote drivers not heard from)
     def close(self) -> None: ...
 
 
@@ -63,7 +64,10 @@ class SitlPlant:
         for rb in self.robots:
             rb.drivers.service(now_m)
             rb.drivers.step(dt)
-            right_pos, left_pos, right, left = rb.drivers.wheel_state()
+            state = rb.drivers.wheel_state()
+            if state is None:
+                continue
+            right_pos, left_pos, right, left = state
             v, u = body_velocity(TWO_PI * right, TWO_PI * left, r.wheel_radius, r.wheel_base)
             rb.v, rb.u = float(v), float(u)
             if rb.wheels is None:       # the robot rolls exactly as its wheels turned
