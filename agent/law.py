@@ -56,10 +56,6 @@ class LawMemory:
                    avoiding=np.zeros(n, bool), side=np.zeros(n, np.int8),
                    followed_center=np.zeros((n, 2)), followed_radius=np.zeros(n))
 
-    def take(self, idx: np.ndarray) -> "LawMemory":
-        """The memory of robots ``idx`` only."""
-        return LawMemory(*(getattr(self, f)[idx] for f in self.__dataclass_fields__))
-
 
 @dataclass(frozen=True)
 class LawInput:

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 
 import can
 
-from transport.odrive_frames import (AxisError, AxisState, Cmd, ControlMode, FrameError,
-                                     InputMode, decode, encode)
+from transport.odrive_frames import (AxisError, AxisState, Cmd, ControlMode, Frame, InputMode,
+                                     encode, receive)
 
 log = logging.getLogger(__name__)
 
@@ -149,8 +149,8 @@ class DriverPair:
     def service(self, now: float) -> None:
         """Handle every frame waiting on the bus, then send what is due at ``now`` [s]."""
         self._now = now
-        while (msg := self.bus.recv(0.0)) is not None:
-            self._handle(msg)
+        for frame in receive(self.bus, self.ignored):
+            self._handle(frame)
         for node, axis in self.axes.items():
             due = self._next.setdefault(node, {Cmd.HEARTBEAT: now,
                                                Cmd.GET_ENCODER_ESTIMATES: now})
@@ -186,12 +186,7 @@ class DriverPair:
         except can.CanError as exc:
             log.warning("emulated driver could not send: %s", exc)
 
-    def _handle(self, msg: can.Message) -> None:
-        try:
-            frame = decode(msg)
-        except FrameError as exc:
-            self.ignored[exc.reason] += 1
-            return
+    def _handle(self, frame: Frame) -> None:
         axis = self.axes.get(frame.node)
         if axis is None:
             return                                    # another node on the bus

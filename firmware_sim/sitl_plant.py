@@ -3,15 +3,15 @@
 For each hosted robot the plant serves its two emulated drivers on the robot's own CAN bus
 and, every physics step, moves the robot along the exact arc its wheels turned through
 (the drivers' encoder positions, after their limits, ramps, watchdogs and faults), so the
-ground truth and the agent's odometry differ only by what the agent has not read yet. It publishes on Zenoh what
-the real world would give the robot's sensors: obstacle detections within sensing range
+ground truth and the agent's odometry differ only by what the agent has not read yet. It
+publishes on Zenoh what the real world would give the robot's sensors: obstacle detections within sensing range
 (10 Hz) and, SITL only, the ground truth (every ``truth_every`` physics steps).
 """
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Callable, Mapping, Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -95,9 +95,6 @@ class SitlPlant:
             self.publish("obstacles", rb.robot_id,
                          ObstaclesMsg(rb.robot_id, self._seq, now_w, self.obstacles.centers[mask],
                                       self.obstacles.radii[mask]).encode())
-
-    def poses(self) -> Mapping[int, np.ndarray]:
-        return {rb.robot_id: rb.pose.copy() for rb in self.robots}
 
     def close(self) -> None:
         for rb in self.robots:

@@ -36,6 +36,7 @@ def test_udp_multicast_hears_peers_but_not_itself():
 
 
 def test_groups_that_could_leave_the_host_are_refused():
+    # refused by address check before any socket is opened: nothing is ever sent to them
     for group in ("ff15::1", "ff02::1", "239.1.1.1"):
         with pytest.raises(BusOpenError, match="ff11|IPv6 multicast"):
             open_bus("udp_multicast", group, port=free_udp_port())

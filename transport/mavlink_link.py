@@ -32,7 +32,8 @@ frame NED: north = y, east = x, down = 0, yaw = pi/2 - theta wrapped to (-pi, pi
 
 HEARTBEAT: type GROUND_ROVER, autopilot GENERIC, base_mode CUSTOM_MODE_ENABLED (+ SAFETY_ARMED
 when armed), custom_mode :class:`CustomMode` (4 HOLD, also reported while disarmed; 10
-FORMATION, shown as AUTO), system_status CRITICAL during a failsafe, else ACTIVE when armed, STANDBY when not.
+FORMATION, shown as AUTO), system_status CRITICAL during a failsafe, else ACTIVE when armed,
+STANDBY when not.
 
 Commands (only those whose target_system is this robot; target_component 0 or 1):
 COMMAND_LONG/COMMAND_INT MAV_CMD_COMPONENT_ARM_DISARM (param1 1 arm, 0 disarm),

@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import enum
 import math
+from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
+from typing import Iterator
 
 import can
 import cantools
@@ -133,6 +135,16 @@ def decode(msg: can.Message) -> Frame:
 def message_name(cmd: Cmd) -> str:
     """The DBC's name of a message without its node prefix, e.g. ``Get_Encoder_Estimates``."""
     return _layout(cmd).name.split("_", 1)[1]
+
+
+def receive(bus: can.BusABC, rejected: Counter) -> Iterator[Frame]:
+    """The decoded frames waiting on ``bus`` (never blocks); frames to ignore are counted
+    in ``rejected`` by reason."""
+    while (msg := bus.recv(0.0)) is not None:
+        try:
+            yield decode(msg)
+        except FrameError as exc:
+            rejected[exc.reason] += 1
 
 
 def cycle_time(cmd: Cmd) -> float | None:

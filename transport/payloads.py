@@ -101,6 +101,16 @@ def _header(data: bytes, kind: PayloadKind) -> Header:
     return Header(kind, robot_id, seq, stamp)
 
 
+def _fixed(data: bytes, kind: PayloadKind, body: struct.Struct, what: str
+           ) -> tuple[Header, tuple]:
+    """Header and body values of a fixed-size payload, every value finite."""
+    h = _header(data, kind)
+    _exact(data, HEADER.size + body.size)
+    values = body.unpack_from(data, HEADER.size)
+    _finite(values, what)
+    return h, values
+
+
 def _pack_header(kind: PayloadKind, robot_id: int, seq: int, stamp: float) -> bytes:
     return HEADER.pack(VERSION, kind, robot_id, seq & 0xFFFFFFFF, stamp)
 
@@ -141,10 +151,8 @@ class StateMsg:
 
     @classmethod
     def decode(cls, data: bytes) -> "StateMsg":
-        h = _header(data, PayloadKind.STATE)
-        _exact(data, cls.SIZE)
-        x, y, th, v, u, xd, yd, mode, flags = STATE_BODY.unpack_from(data, HEADER.size)
-        _finite((x, y, th, v, u, xd, yd), "state")
+        h, (x, y, th, v, u, xd, yd, mode, flags) = _fixed(data, PayloadKind.STATE, STATE_BODY,
+                                                          "state")
         return cls(h.robot_id, h.seq, h.stamp, x, y, th, v, u, xd, yd, mode,
                    StateFlags(flags & 0x7))
 
@@ -206,10 +214,7 @@ class TruthMsg:
 
     @classmethod
     def decode(cls, data: bytes) -> "TruthMsg":
-        h = _header(data, PayloadKind.TRUTH)
-        _exact(data, cls.SIZE)
-        values = TRUTH_BODY.unpack_from(data, HEADER.size)
-        _finite(values, "truth")
+        h, values = _fixed(data, PayloadKind.TRUTH, TRUTH_BODY, "truth")
         return cls(h.robot_id, h.seq, h.stamp, *values)
 
 
@@ -234,10 +239,7 @@ class WheelsMsg:
 
     @classmethod
     def decode(cls, data: bytes) -> "WheelsMsg":
-        h = _header(data, PayloadKind.WHEELS)
-        _exact(data, cls.SIZE)
-        values = WHEELS_BODY.unpack_from(data, HEADER.size)
-        _finite(values, "wheels")
+        h, values = _fixed(data, PayloadKind.WHEELS, WHEELS_BODY, "wheels")
         return cls(h.robot_id, h.seq, h.stamp, *values)
 
 

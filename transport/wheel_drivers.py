@@ -18,8 +18,8 @@ from typing import Callable
 import can
 
 from agent.ports import WheelFeedback
-from transport.odrive_frames import (AxisState, Cmd, ControlMode, FrameError, InputMode,
-                                     decode, encode, error_names)
+from transport.odrive_frames import (AxisState, Cmd, ControlMode, InputMode, encode, error_names,
+                                     receive)
 
 log = logging.getLogger(__name__)
 
@@ -98,12 +98,7 @@ class WheelDrivers:
     def poll(self) -> int:
         """Drain every waiting frame (never blocks); returns how many were used."""
         used = 0
-        while (msg := self.bus.recv(0.0)) is not None:
-            try:
-                frame = decode(msg)
-            except FrameError as exc:
-                self.ignored[exc.reason] += 1
-                continue
+        for frame in receive(self.bus, self.ignored):
             st = self.status.get(frame.node)
             if st is None or frame.rtr:
                 continue
