@@ -4,8 +4,9 @@ For each hosted robot the plant serves its two emulated drivers on the robot's o
 and, every physics step, moves the robot along the exact arc its wheels turned through
 (the drivers' encoder positions, after their limits, ramps, watchdogs and faults), so the
 ground truth and the agent's odometry differ only by what the agent has not read yet. It
-publishes on Zenoh what the real world would give the robot's sensors: obstacle detections within sensing range
-(10 Hz) and, SITL only, the ground truth (every ``truth_every`` physics steps).
+publishes on Zenoh what the real world would give the robot's sensors: obstacle detections
+within sensing range (10 Hz) and, SITL only, the ground truth (every ``truth_every`` physics
+steps).
 """
 from __future__ import annotations
 
