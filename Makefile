@@ -34,6 +34,7 @@ sim: $(STAMP)
 	$(BIN)/boundswarm sim scenarios/paper.toml --out runs/paper-sim
 
 test: $(STAMP) system-packages
+	-$(BIN)/python -m hil.uml ensure
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

@@ -99,7 +99,7 @@ def main() -> None:
         return
     rows = {"udp_multicast (this kernel)": with_drivers("udp_multicast", "ff11::b5:7", 43777,
                                                           args.seconds)}
-    if uml.available() is None:
+    if uml.usable() is None:
         r = uml.run_script(f".venv/bin/python bench/can_link.py --inner socketcan,vcan0 "
                            f"--seconds {args.seconds}", cwd=ROOT, timeout=300)
         line = next((x for x in r.output.splitlines() if x.startswith("RESULT ")), None)

