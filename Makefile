@@ -25,6 +25,9 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
+	# MAVProxy for the ground-station acceptance tests; --no-deps: its own dependencies are
+	# 3D-map and camera packages (vtk, opencv: ~780 MB) that its console modules do not use
+	$(BIN)/pip install --quiet --no-deps 'MAVProxy>=1.8.75'
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -28,8 +28,10 @@ def integrate_arc(pose: np.ndarray, v: np.ndarray, u: np.ndarray, dt: float | np
     x, y, th = pose[..., 0], pose[..., 1], pose[..., 2]
     dth = u * dt
     half = 0.5 * dth
-    # chord length = v dt * sinc(dth/2); np.sinc(z) = sin(pi z)/(pi z)
-    chord = v * dt * np.sinc(half / np.pi)
+    # chord length = v dt * sin(dth/2) / (dth/2), its series below 1e-4 rad (error < 1e-17)
+    small = np.abs(half) < 1e-4
+    sinc = np.where(small, 1.0 - half * half / 6.0, np.sin(half) / np.where(small, 1.0, half))
+    chord = v * dt * sinc
     mid = th + half
     out = np.empty(np.broadcast_shapes(pose.shape, np.shape(v) + (3,)))
     out[..., 0] = x + chord * np.cos(mid)

@@ -72,7 +72,8 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         conf = (config_from_file(s.zenoh.config) if s.zenoh.config else
                 session_config(s.zenoh.mode, s.zenoh.listen, s.zenoh.connect))
         session = open_session(conf, f"agent {s.robot_id}")
-        swarm = SwarmLink(session, Keys(s.swarm), s.robot_id, clock.wall)
+        swarm = SwarmLink(session, Keys(s.swarm), s.robot_id, clock.wall,
+                          near_radius=s.zenoh.near_radius)
         agent = Agent(s, motor, swarm, clock)
         link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
                          clock.wall)

@@ -10,7 +10,8 @@
     [robot]                         # agent.config.RobotParams (wheels, driver limits)
     [can]                           # python-can terms: interface, channel, port (udp_multicast),
                                     # bitrate; left_node, right_node (ODrive node ids)
-    [zenoh]                         # mode ("client" or "peer"), connect = [...], listen = [...]
+    [zenoh]                         # mode ("client" or "peer"), connect = [...], listen = [...],
+                                    # near_radius (m; 0: full-rate states of every robot)
     [timeouts]                      # feedback (0.2 s), staleness (0.5 s), arm (5 s)
     [sensing]                       # range (m, default 2c)
     [mavlink]                       # url (udpout:127.0.0.1:14550), origin [lat, lon, alt],
@@ -52,6 +53,8 @@ class ZenohSettings:
     listen: tuple[str, ...] = ()
     config: str | None = None        # a Zenoh JSON5 config file (TLS...); relative to the
                                      # agent config's folder; replaces mode/connect/listen
+    near_radius: float = 0.0         # m; > 0: full-rate states only from robots this near,
+                                     # beacons from the others (transport.zenoh_link)
 
 
 @dataclass(frozen=True)
@@ -143,13 +146,14 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
         raise rd.fail("[can] right_node", f"must differ from left_node ({can.left_node})")
 
     z = rd.table(doc, "zenoh")
-    rd.only(z, {"mode", "connect", "listen", "config"}, "[zenoh]")
+    rd.only(z, {"mode", "connect", "listen", "config", "near_radius"}, "[zenoh]")
     zenoh = ZenohSettings(mode=rd.string(z, "mode", "[zenoh] mode", "client"),
                           connect=rd.strings(z, "connect", "[zenoh] connect",
                                              ZenohSettings.connect),
                           listen=rd.strings(z, "listen", "[zenoh] listen"),
                           config=rd.string(z, "config", "[zenoh] config")
-                          if "config" in z else None)
+                          if "config" in z else None,
+                          near_radius=rd.number(z, "near_radius", "[zenoh] near_radius", 0.0))
     if zenoh.mode not in ("client", "peer"):
         raise rd.fail("[zenoh] mode", f"expected client or peer, got {zenoh.mode!r}")
     if zenoh.mode == "client" and not zenoh.connect and zenoh.config is None:
@@ -166,6 +170,9 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
     s = rd.table(doc, "sensing")
     rd.only(s, {"range"}, "[sensing]")
     sensing = rd.number(s, "range", "[sensing] range", 2.0 * control.c, positive=True)
+    if zenoh.near_radius != 0 and zenoh.near_radius < sensing + 1.0:
+        raise rd.fail("[zenoh] near_radius", f"must be 0 (every robot) or at least the sensing "
+                      f"range + 1 m ({sensing + 1.0:g} m), got {zenoh.near_radius:g}")
 
     autostart = doc.get("autostart", False)
     if not isinstance(autostart, bool):

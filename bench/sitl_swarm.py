@@ -1,6 +1,6 @@
 """SITL swarm timing at 50 Hz for growing swarms (prints a table).
 
-    .venv/bin/python bench/sitl_swarm.py [--sizes 9 18 30 50] [--duration 15]
+    .venv/bin/python bench/sitl_swarm.py [--sizes 9 18 30 50] [--duration 15] [--near-radius 12]
 
 Each size runs ``boundswarm sitl`` on a grid formation (spacing 5 m, no obstacles) whose
 robots start scattered behind their places, with every agent a separate process, the plant
@@ -46,6 +46,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[9, 18, 30, 50])
     parser.add_argument("--duration", type=float, default=15.0)
+    parser.add_argument("--near-radius", type=float, default=0.0,
+                        help="agents' near radius [m] (0: full-rate states of every robot)")
     args = parser.parse_args()
     print(f"{'robots':>6} {'misses':>7} {'jit p50':>8} {'jit p99':>8} {'jit max':>8} "
           f"{'age p50':>8} {'age p99':>8} {'cpu/agent':>9} {'cpu plant':>9} {'collis.':>7} "
@@ -55,9 +57,9 @@ def main() -> None:
             sc = Path(tmp) / f"bench{n}.toml"
             sc.write_text(scenario_text(n, args.duration))
             out = Path(tmp) / "run"
-            proc = subprocess.run([sys.executable, "-m", "hil.cli", "sitl", str(sc), "--out",
-                                   str(out), "--no-live"], cwd=ROOT, capture_output=True,
-                                  text=True, timeout=600)
+            cmd = [sys.executable, "-m", "hil.cli", "sitl", str(sc), "--out", str(out),
+                   "--no-live", "--near-radius", str(args.near_radius)]
+            proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
             if not (out / "metrics.json").exists():
                 print(f"{n:>6} failed (exit {proc.returncode}): {proc.stdout[-500:]}")
                 continue

@@ -77,7 +77,20 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     opts = SitlOptions(can_interface=args.can_interface, can_channel=args.can_channel,
                        can_base_port=args.can_base_port,
                        robots_per_plant=args.robots_per_plant, live=not args.no_live,
-                       gcs_port=args.gcs_port)
+                       gcs_port=args.gcs_port, near_radius=args.near_radius,
+                       mavlink_key=str(Path(args.mavlink_key).resolve()) if args.mavlink_key
+                       else None)
+    if opts.mavlink_key:
+        from transport.mavlink_signing import load_signing_key
+        try:
+            load_signing_key(Path(opts.mavlink_key))
+        except (OSError, ValueError) as exc:
+            print(f"boundswarm sitl: --mavlink-key: {exc}", file=sys.stderr)
+            return 2
+    if opts.near_radius != 0 and opts.near_radius < sc.sensing_range + 1.0:
+        print(f"boundswarm sitl: --near-radius must be 0 or at least the sensing range + 1 m "
+              f"({sc.sensing_range + 1.0:g} m), got {opts.near_radius:g}", file=sys.stderr)
+        return 2
     started = time.perf_counter()
     try:
         run = run_sitl(sc, out, opts, console)
@@ -339,6 +352,12 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--no-live", action="store_true", help="no live status table")
     sitl.add_argument("--gcs-port", type=int, default=14550,
                       help="UDP port of the ground station on 127.0.0.1 (0: no MAVLink)")
+    sitl.add_argument("--mavlink-key", metavar="FILE",
+                      help="MAVLink 2 signing key of every agent (32 bytes, or a passphrase "
+                           "as MAVProxy's 'signing key' hashes it); unsigned commands refused")
+    sitl.add_argument("--near-radius", type=float, default=0.0, metavar="M",
+                      help="agents take full-rate states only from robots within M metres "
+                           "and 5 Hz beacons from the rest (0: every robot at full rate)")
     sitl.set_defaults(func=cmd_sitl)
 
     agent = sub.add_parser("agent", help="one agent process (what runs on a robot computer)")

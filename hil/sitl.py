@@ -53,6 +53,8 @@ class SitlOptions:
     robots_per_plant: int = 0           # 0: one plant process hosts every robot
     zenoh_port: int | None = None       # router port on 127.0.0.1 (default: a free one)
     gcs_port: int = 14550               # ground station's UDP port on 127.0.0.1 (0: no MAVLink)
+    near_radius: float = 0.0            # m, agents' [zenoh] near_radius (0: every robot)
+    mavlink_key: str | None = None      # absolute path of a MAVLink signing key file (all agents)
     startup_timeout: float = 40.0       # s
     lead_time: float = 1.5              # s between the mission message and its epoch
     live: bool = True                   # live status table on a terminal
@@ -95,9 +97,11 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
                           channel=(opts.can_channel or "vcan{i}").format(i=index, id=rid))
     return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=tuple(map(float, sc.poses[index])),
                          control=sc.control, robot=sc.robot, can=can,
-                         zenoh=ZenohSettings(mode="client", connect=(endpoint,)),
+                         zenoh=ZenohSettings(mode="client", connect=(endpoint,),
+                                             near_radius=opts.near_radius),
                          autostart=True, sensing_range=sc.sensing_range,
-                         mavlink=MavlinkSettings(url=f"udpout:127.0.0.1:{mavlink_port}"))
+                         mavlink=MavlinkSettings(url=f"udpout:127.0.0.1:{mavlink_port}",
+                                                 signing_key_file=opts.mavlink_key))
 
 
 def _status_table(sc: Scenario, states: dict, truth: dict, presence: frozenset,

@@ -59,3 +59,14 @@ def test_metrics_only_run(tmp_path):
                  "--record-every", "0", "--duration", "2"]) == 0
     assert json.loads((out / "metrics.json").read_text())["duration"] == 2.0
     assert not (out / "figures").exists()
+
+
+def test_sitl_refuses_bad_options_before_starting_anything(tmp_path, capsys):
+    out = tmp_path / "o"
+    args = ["sitl", str(SCENARIOS / "sitl_small.toml"), "--out", str(out), "--no-live"]
+    assert main(args + ["--near-radius", "3"]) == 2
+    assert "--near-radius must be 0 or at least the sensing range" in capsys.readouterr().err
+    assert main(args + ["--mavlink-key", str(tmp_path / "missing.key")]) == 2
+    err = capsys.readouterr().err
+    assert "--mavlink-key" in err and "missing.key" in err
+    assert not out.exists()

@@ -132,3 +132,58 @@ def test_swarm_link_between_two_agents_and_a_recording(sessions, tmp_path):
     kinds = [kind for _, kind, _, _ in read_messages(tmp_path / "run.mcap")]
     assert {"state", "obstacles", "mission"} <= set(kinds)
     assert rec.dropped["size"] == 1
+
+
+def test_near_states_subscribe_to_near_robots_only(sessions):
+    """With a near radius, full-rate states come only from robots near; beacons from all."""
+    from transport.zenoh_link import SwarmLink
+
+    a, b = sessions
+    keys = Keys("near")
+    me = SwarmLink(a, keys, 1, time.time, near_radius=10.0)
+    near, far = SwarmLink(b, keys, 2, time.time), SwarmLink(b, keys, 3, time.time)
+
+    def at(link, rid, seq, x):
+        link.publish(StateMsg(rid, seq, time.time(), x, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0,
+                              StateFlags(0)))
+
+    try:
+        time.sleep(0.3)
+        seq = 0
+
+        def round_(x_near, x_far, seconds):
+            nonlocal seq
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                seq += 1
+                at(near, 2, seq, x_near)
+                at(far, 3, seq, x_far)
+                at(me, 1, seq, 0.0)
+                me.neighbours()
+                time.sleep(0.02)
+
+        round_(5.0, 50.0, 1.5)
+        c = me.counters()
+        assert c["near"] == [2]                                   # robot 3 is 50 m away
+        assert set(me.neighbours()) == {2, 3}                     # ... but known from beacons
+        assert c["states"]["accepted"] > 40                       # ~50 Hz from robot 2
+        assert 4 <= c["beacons"]["accepted"] <= 25                # 5 Hz from each of 2, 3
+        # robot 3 comes near, robot 2 goes far beyond radius + hysteresis
+        round_(30.0, 4.0, 1.0)
+        assert me.counters()["near"] == [3]
+        last = me.neighbours()[3].msg
+        assert last.x == 4.0 and time.time() - last.stamp < 0.2   # full rate, fresh
+    finally:
+        for link in (me, near, far):
+            link.close()
+
+
+def test_near_radius_below_the_sensing_range_is_refused(tmp_path):
+    from agent.config import ConfigError
+    from agent.settings import load_settings
+
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text('robot_id = 1\nswarm = "s"\ninitial_pose = [0.0, 0.0, 0.0]\n'
+                   '[zenoh]\nnear_radius = 5.0\n[sensing]\nrange = 8.0\n')
+    with pytest.raises(ConfigError, match=r"\[zenoh\] near_radius.*at least the sensing range"):
+        load_settings(cfg)

@@ -67,8 +67,8 @@ class EchoFilteredBus(can.BusABC):
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
-            try:
-                msg = self.inner.recv(remaining)
+            try:   # the inner bus has no filters: its own receive, without recv()'s loop
+                msg, _ = self.inner._recv_internal(remaining)
             except can.CanOperationError as exc:
                 if isinstance(exc.__cause__, OSError):
                     raise

@@ -65,10 +65,15 @@ InputMode = enum.IntEnum("InputMode", {v: k for k, v in
                                        _choices("Set_Controller_Mode", "Input_Mode").items()})
 
 
+_ERRORS = tuple(sorted(AxisError, key=lambda e: e.value))
+_KNOWN_ERRORS = sum(e.value for e in AxisError)
+
+
+@lru_cache(maxsize=64)
 def error_names(bits: int) -> tuple[str, ...]:
     """Names of the error bits set in ``bits`` (unknown bits as hex)."""
-    names = tuple(e.name for e in sorted(AxisError, key=lambda e: e.value) if bits & e.value)
-    rest = bits & ~sum(e.value for e in AxisError)
+    names = tuple(e.name for e in _ERRORS if bits & e.value)
+    rest = bits & ~_KNOWN_ERRORS
     return names + ((f"0x{rest:x}",) if rest else ())
 
 

@@ -116,7 +116,7 @@ def _pack_header(kind: PayloadKind, robot_id: int, seq: int, stamp: float) -> by
 
 
 def _finite(values, what: str) -> None:
-    if not all(math.isfinite(v) for v in values):
+    if not all(map(math.isfinite, values)):
         raise PayloadError("nonfinite", what)
 
 

@@ -3,6 +3,7 @@
 Key space (prefix ``boundswarm/<swarm>``)::
 
     robot/<id>/state       agent state every period (transport.payloads.StateMsg)
+    robot/<id>/beacon      the same state at a low rate (5 Hz), for robots far away
     robot/<id>             liveliness token while the agent runs
     robot/<id>/obstacles   obstacle detections for that robot (ObstaclesMsg)
     robot/<id>/truth       ground truth pose, SITL only (TruthMsg)
@@ -13,6 +14,11 @@ Receiving never blocks the control loop: samples wait in bounded rings filled by
 own threads; the loop drains them without blocking and reads :meth:`Latest.snapshot`, a
 mapping that is never mutated after it is returned. Malformed payloads are dropped and
 counted.
+
+Deliveries of full-rate states grow as N^2 * f. With ``near_radius`` set, an agent takes every
+robot's beacon (N^2 * 5 Hz in all) and subscribes to the full-rate state key of only the robots
+whose last known position is within ``near_radius`` of its own (:class:`NearStates`); a robot
+that stops talking still shows as stale in the beacons, so nothing is lost for safety.
 """
 from __future__ import annotations
 
@@ -91,6 +97,9 @@ class Keys:
 
     def state(self, robot_id: int | str) -> str:
         return f"{self.prefix}/robot/{robot_id}/state"
+
+    def beacon(self, robot_id: int | str) -> str:
+        return f"{self.prefix}/robot/{robot_id}/beacon"
 
     def obstacles(self, robot_id: int | str) -> str:
         return f"{self.prefix}/robot/{robot_id}/obstacles"
@@ -211,22 +220,104 @@ class Presence:
         self._sub.undeclare()
 
 
-class SwarmLink:
-    """One agent's Zenoh link (agent.ports.SwarmPort): its state out; neighbours, its
-    obstacles and the mission in; a liveliness token while it runs."""
+def newest(*maps: Mapping[int, Received[StateMsg]]) -> dict[int, Received[StateMsg]]:
+    """Per robot id, the message with the latest stamp among ``maps``."""
+    out: dict[int, Received[StateMsg]] = {}
+    for m in maps:
+        for rid, rec in m.items():
+            held = out.get(rid)
+            if held is None or rec.msg.stamp > held.msg.stamp:
+                out[rid] = rec
+    return out
+
+
+class NearStates:
+    """Neighbour states for a large swarm: all beacons, full-rate states of the robots near.
+
+    :meth:`refocus` (own position, metres in the world frame) subscribes to the state key of
+    each robot last seen within ``radius`` and drops the subscription of robots beyond
+    ``radius + hysteresis``. :meth:`snapshot` is like :meth:`Latest.snapshot`: per robot, the
+    newer of its beacon and its state, a mapping never mutated afterwards.
+    """
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
-                 clock: Callable[[], float]):
-        self.keys, self.robot_id = keys, robot_id
+                 clock: Callable[[], float], radius: float, hysteresis: float = 2.0):
+        self._session, self._keys, self._clock = session, keys, clock
+        self.robot_id, self.radius, self.hysteresis = robot_id, radius, hysteresis
+        self.beacons = Latest(session, keys.beacon("*"), StateMsg.decode, clock,
+                              ignore=[robot_id])
+        self.near: dict[int, Latest[StateMsg]] = {}
+        self._closed = {"received": 0, "accepted": 0, "dropped": Counter()}
+        self._snapshot: Mapping[int, Received[StateMsg]] = MappingProxyType({})
+
+    def snapshot(self) -> Mapping[int, Received[StateMsg]]:
+        self._snapshot = MappingProxyType(newest(
+            self.beacons.snapshot(), *(sub.snapshot() for sub in self.near.values())))
+        return self._snapshot
+
+    def refocus(self, x: float, y: float) -> None:
+        for rid, rec in self._snapshot.items():
+            d = ((rec.msg.x - x) ** 2 + (rec.msg.y - y) ** 2) ** 0.5
+            if rid not in self.near and d <= self.radius:
+                self.near[rid] = Latest(self._session, self._keys.state(rid), StateMsg.decode,
+                                        self._clock, capacity=8)
+            elif rid in self.near and d > self.radius + self.hysteresis:
+                sub = self.near.pop(rid)
+                c = sub.counters()
+                self._closed["received"] += c["received"]
+                self._closed["accepted"] += c["accepted"]
+                self._closed["dropped"].update(c["dropped"])
+                sub.close()
+
+    def counters(self) -> dict:
+        """Full-rate state counters (as :meth:`Latest.counters`), closed subscriptions included."""
+        total = {"received": self._closed["received"], "accepted": self._closed["accepted"],
+                 "dropped": Counter(self._closed["dropped"])}
+        for sub in self.near.values():
+            c = sub.counters()
+            total["received"] += c["received"]
+            total["accepted"] += c["accepted"]
+            total["dropped"].update(c["dropped"])
+        return {**total, "dropped": dict(total["dropped"])}
+
+    def close(self) -> None:
+        for sub in (self.beacons, *self.near.values()):
+            sub.close()
+        self.near.clear()
+
+
+class SwarmLink:
+    """One agent's Zenoh link (agent.ports.SwarmPort): its state out (and a beacon every
+    ``BEACON_PERIOD``); neighbours, its obstacles and the mission in; a liveliness token
+    while it runs. ``near_radius`` [m] > 0 takes full-rate states only from robots within
+    it (:class:`NearStates`); 0 takes every robot's."""
+
+    BEACON_PERIOD = 0.2        # s
+    REFOCUS_PERIOD = 0.1       # s, how often the near set is revised
+
+    def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
+                 clock: Callable[[], float], near_radius: float = 0.0):
+        self.keys, self.robot_id, self._clock = keys, robot_id, clock
         self._pub = session.declare_publisher(keys.state(robot_id))
+        self._beacon = session.declare_publisher(keys.beacon(robot_id))
+        self._beacon_due = self._refocus_due = 0.0
         self._token = session.liveliness().declare_token(keys.robot(robot_id))
-        self.states = Latest(session, keys.state("*"), StateMsg.decode, clock,
-                             ignore=[robot_id])
+        self.states: Latest[StateMsg] | NearStates = (
+            NearStates(session, keys, robot_id, clock, near_radius) if near_radius > 0 else
+            Latest(session, keys.state("*"), StateMsg.decode, clock, ignore=[robot_id]))
         self._obstacles = Latest(session, keys.obstacles(robot_id), ObstaclesMsg.decode, clock)
         self._mission = Latest(session, keys.mission, MissionMsg.decode, clock)
 
     def publish(self, state: StateMsg) -> None:
-        self._pub.put(state.encode())
+        payload = state.encode()
+        self._pub.put(payload)
+        now = self._clock()
+        if now >= self._beacon_due:
+            self._beacon.put(payload)
+            self._beacon_due = now + self.BEACON_PERIOD
+        if isinstance(self.states, NearStates) and now >= self._refocus_due:
+            self.states.refocus(state.x, state.y)
+            self._refocus_due = now + self.REFOCUS_PERIOD
 
     def neighbours(self) -> Mapping[int, Received[StateMsg]]:
         return self.states.snapshot()
@@ -240,8 +331,12 @@ class SwarmLink:
         return got.msg if got else None
 
     def counters(self) -> dict:
-        return {"states": self.states.counters(), "obstacles": self._obstacles.counters(),
-                "mission": self._mission.counters()}
+        out = {"states": self.states.counters(), "obstacles": self._obstacles.counters(),
+               "mission": self._mission.counters()}
+        if isinstance(self.states, NearStates):
+            out["beacons"] = self.states.beacons.counters()
+            out["near"] = sorted(self.states.near)
+        return out
 
     def close(self) -> None:
         """Drop the liveliness token (the swarm sees this robot leave) and the subscribers."""
@@ -249,3 +344,4 @@ class SwarmLink:
         for sub in (self.states, self._obstacles, self._mission):
             sub.close()
         self._pub.undeclare()
+        self._beacon.undeclare()
