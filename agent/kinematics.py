@@ -6,6 +6,8 @@ are positive when the wheel drives the robot forward.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 TWO_PI = 2.0 * np.pi
@@ -38,6 +40,18 @@ def integrate_arc(pose: np.ndarray, v: np.ndarray, u: np.ndarray, dt: float | np
     out[..., 1] = y + chord * np.sin(mid)
     out[..., 2] = wrap_angle(th + dth)
     return out
+
+
+def arc_step(x: float, y: float, theta: float, dist: float, dtheta: float
+             ) -> tuple[float, float, float]:
+    """One robot's :func:`integrate_arc` with dt = 1, in plain floats: the pose after an arc
+    of length ``dist`` [m] turning by ``dtheta`` [rad] (odometry, every period)."""
+    half = 0.5 * dtheta
+    sinc = 1.0 - half * half / 6.0 if abs(half) < 1e-4 else math.sin(half) / half
+    mid = theta + half
+    wrapped = (theta + dtheta + math.pi) % TWO_PI - math.pi
+    return (x + dist * sinc * math.cos(mid), y + dist * sinc * math.sin(mid),
+            math.pi if wrapped == -math.pi else wrapped)
 
 
 def wheel_speeds(v: np.ndarray, u: np.ndarray, wheel_radius: float, wheel_base: float

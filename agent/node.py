@@ -233,7 +233,7 @@ class Agent:
         snap = self.swarm.neighbours()
         states = [r.msg for rid, r in snap.items() if rid != self.s.robot_id]
         if states:
-            arr = np.array([m.as_array() for m in states])
+            arr = np.array([(m.x, m.y, m.theta, m.v, m.u) for m in states])
             stamps = np.array([m.stamp for m in states])
             pos, stale = extrapolate(arr, stamps, now_w, self.s.staleness)
             near = np.hypot(*(pos - pose[:2]).T) <= self.s.sensing_range

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.kinematics import integrate_arc
+from agent.kinematics import arc_step
 
 
 @dataclass
@@ -30,7 +30,6 @@ class Odometry:
             d_left = 2.0 * math.pi * self.wheel_radius * (pos_left_rev - self._last[1])
             dist = 0.5 * (d_right + d_left)
             dtheta = (d_right - d_left) / self.wheel_base
-            # an arc of length `dist` turning by `dtheta` is a unicycle step with dt = 1
-            self.pose = integrate_arc(self.pose, np.float64(dist), np.float64(dtheta), 1.0)
+            self.pose = np.array(arc_step(*map(float, self.pose), dist, dtheta))
         self._last = (pos_right_rev, pos_left_rev)
         return self.pose

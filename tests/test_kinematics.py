@@ -55,3 +55,13 @@ def test_saturation_keeps_curvature_and_limit(v, u):
 def test_saturation_only_when_needed():
     wr, wl = saturate_wheels(np.array([5.0, 100.0]), np.array([-5.0, 50.0]), 62.8)
     assert wr == pytest.approx([5.0, 62.8]) and wl == pytest.approx([-5.0, 31.4])
+
+
+@given(st.floats(-50, 50), st.floats(-50, 50), st.floats(-4, 4), st.floats(-5, 5),
+       st.floats(-7, 7))
+def test_scalar_arc_step_is_integrate_arc(x, y, theta, dist, dtheta):
+    from agent.kinematics import arc_step
+    want = integrate_arc(np.array([x, y, theta]), np.float64(dist), np.float64(dtheta), 1.0)
+    got = arc_step(x, y, theta, dist, dtheta)
+    assert np.allclose(got[:2], want[:2], atol=1e-9)
+    assert abs(wrap_angle(got[2] - want[2])) < 1e-9 and -np.pi < got[2] <= np.pi

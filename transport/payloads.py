@@ -156,10 +156,6 @@ class StateMsg:
         return cls(h.robot_id, h.seq, h.stamp, x, y, th, v, u, xd, yd, mode,
                    StateFlags(flags & 0x7))
 
-    def as_array(self) -> np.ndarray:
-        """(x, y, theta, v, u), the form agent.neighbours.extrapolate takes."""
-        return np.array([self.x, self.y, self.theta, self.v, self.u])
-
 
 @dataclass(frozen=True)
 class ObstaclesMsg:
