@@ -5,6 +5,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -117,7 +118,7 @@ def _conf(path: Path) -> zenoh.Config:
     return conf
 
 
-def _client(out: Path, cn: str, port: int) -> zenoh.Session:
+def _client(out: Path, cn: str, port: int, via: int | None = None) -> zenoh.Session:
     """A client with ``cn``'s bundle certificate (paths made absolute for this test)."""
     base = out / ("ground" if cn == "ground" else cn)
     doc = json.loads((base / ("ground-client.json5" if cn == "ground" else "zenoh.json5"))
@@ -125,7 +126,7 @@ def _client(out: Path, cn: str, port: int) -> zenoh.Session:
     tls = doc["transport"]["link"]["tls"]
     for k in ("root_ca_certificate", "connect_private_key", "connect_certificate"):
         tls[k] = str(base / "certs" / Path(tls[k]).name)
-    doc["connect"]["endpoints"] = [f"tls/127.0.0.1:{port}"]
+    doc["connect"]["endpoints"] = [f"tls/127.0.0.1:{via or port}"]
     p = base / f"test-{cn}.json5"
     p.write_text(json.dumps(doc))
     return zenoh.open(_conf(p))
@@ -192,3 +193,115 @@ def test_a_robot_cannot_publish_on_another_robots_key(bundles, router):
     assert ("boundswarm/field/robot/1/state", b"from robot 1") in got
     assert ("boundswarm/field/robot/2/state", b"from robot 2") in got
     assert ("boundswarm/field/robot/1/state", b"spoofed by robot 2") not in got
+
+
+class TamperingLink:
+    """A TCP relay on 127.0.0.1 to ``upstream``; once ``attack`` is set, it flips a bit in
+    each chunk going upstream ("flip": a tampered TLS record) or sends each chunk twice
+    ("repeat": a replayed record). Closed with every socket by :meth:`close`."""
+
+    def __init__(self, upstream: int, mode: str):
+        self.upstream, self.mode, self.attack = upstream, mode, False
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.port = self.server.getsockname()[1]
+        self.socks: list[socket.socket] = [self.server]
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                down, _ = self.server.accept()
+            except OSError:
+                return
+            up = socket.create_connection(("127.0.0.1", self.upstream))
+            self.socks += [down, up]
+            threading.Thread(target=self._pump, args=(down, up, True), daemon=True).start()
+            threading.Thread(target=self._pump, args=(up, down, False), daemon=True).start()
+
+    def _pump(self, src: socket.socket, dst: socket.socket, upstream: bool) -> None:
+        try:
+            while data := src.recv(65536):
+                if upstream and self.attack and self.mode == "flip":
+                    data = data[:-1] + bytes([data[-1] ^ 0x01])
+                dst.sendall(data)
+                if upstream and self.attack and self.mode == "repeat":
+                    dst.sendall(data)
+        except OSError:
+            pass
+        for sock in (src, dst):
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+    def close(self) -> None:
+        for sock in self.socks:
+            sock.close()
+
+
+@pytest.mark.parametrize("mode", ["flip", "repeat"])
+def test_tampered_or_replayed_records_on_a_robot_link_deliver_nothing(bundles, router, mode):
+    """Mutual TLS on the link: a modified or repeated record breaks robot 1's connection at
+    the router; no altered or repeated state reaches a subscriber."""
+    from transport.payloads import StateFlags, StateMsg
+    out, port = bundles["out"], bundles["port"]
+    link = TamperingLink(port, mode)
+    got: list[bytes] = []
+    ground = r1 = None
+    try:
+        ground = _client(out, "ground", port)
+        ground.declare_subscriber("boundswarm/field/robot/1/state",
+                                  lambda s: got.append(s.payload.to_bytes()))
+        r1 = _client(out, "robot-1", port, via=link.port)
+        time.sleep(0.5)
+        sent, first_attacked = {}, None
+        for seq in range(1, 61):
+            if seq == 21:
+                link.attack, first_attacked = True, seq
+            payload = StateMsg(1, seq, time.time(), float(seq), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                               0, StateFlags(0)).encode()
+            sent[seq] = payload
+            r1.put("boundswarm/field/robot/1/state", payload)
+            time.sleep(0.05)
+        time.sleep(0.5)
+    finally:
+        for session in (r1, ground):
+            if session is not None:
+                session.close()
+        link.close()
+    seqs = [StateMsg.decode(p).seq for p in got]
+    assert all(p == sent[s] for p, s in zip(got, seqs))         # nothing altered
+    assert len(seqs) == len(set(seqs))                           # nothing twice
+    assert len([s for s in seqs if s < first_attacked]) >= 15    # the link worked before
+    assert not [s for s in seqs if s > first_attacked]           # and carried nothing after
+
+
+def test_a_replayed_state_payload_is_dropped_by_the_neighbours(bundles, router):
+    """An old state of robot 1 sent again on its key (by a valid client) is older than the
+    one held: robot 2's agent drops it and counts it."""
+    from transport.payloads import StateFlags, StateMsg
+    from transport.zenoh_link import Keys, SwarmLink
+    out, port = bundles["out"], bundles["port"]
+    r1, r2 = _client(out, "robot-1", port), _client(out, "robot-2", port)
+    two = SwarmLink(r2, Keys("field"), 2, time.time)
+    try:
+        time.sleep(0.5)
+        payloads = [StateMsg(1, seq, time.time(), float(seq), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0,
+                             StateFlags(0)).encode() for seq in (1, 2, 3)]
+        for p in payloads:
+            r1.put("boundswarm/field/robot/1/state", p)
+            time.sleep(0.05)
+        deadline = time.monotonic() + 5
+        while (1 not in two.neighbours() or two.neighbours()[1].msg.seq != 3) \
+                and time.monotonic() < deadline:
+            time.sleep(0.05)
+        r1.put("boundswarm/field/robot/1/state", payloads[0])        # the replay
+        deadline = time.monotonic() + 5
+        while not two.counters()["states"]["dropped"] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert two.neighbours()[1].msg.seq == 3 and two.neighbours()[1].msg.x == 3.0
+        assert two.counters()["states"]["dropped"] == {"out_of_order": 1}
+    finally:
+        two.close()
+        r1.close()
+        r2.close()
