@@ -6,6 +6,7 @@
     swarm = "paper"                 # Zenoh key prefix boundswarm/<swarm>
     initial_pose = [x, y, theta]    # m, m, rad: where odometry starts
     autostart = true                # arm and follow the mission without a ground station
+    realtime_priority = 0           # 1..99: the loop thread runs SCHED_FIFO at it (0: normal)
     [control]                       # agent.config.ControlParams (period = loop period)
     [robot]                         # agent.config.RobotParams (wheels, driver limits)
     [can]                           # python-can terms: interface, channel, port (udp_multicast),
@@ -30,8 +31,8 @@ from agent.config import (ConfigError, ControlParams, RobotParams, TableReader, 
                           load_toml)
 from transport.mavlink_io import parse_url
 
-TOP_KEYS = {"robot_id", "swarm", "initial_pose", "autostart", "control", "robot", "can",
-            "zenoh", "timeouts", "sensing", "mavlink"}
+TOP_KEYS = {"robot_id", "swarm", "initial_pose", "autostart", "realtime_priority", "control",
+            "robot", "can", "zenoh", "timeouts", "sensing", "mavlink"}
 
 
 @dataclass(frozen=True)
@@ -122,6 +123,7 @@ class AgentSettings:
     staleness: float = 0.5            # s, neighbour kept as a static obstacle beyond this
     sensing_range: float = 8.0        # m
     mavlink: MavlinkSettings = field(default_factory=MavlinkSettings)
+    realtime_priority: int = 0        # SCHED_FIFO priority of the loop thread (0: normal)
 
 
 def parse_settings(doc: dict, where: str) -> AgentSettings:
@@ -185,7 +187,9 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
         initial_pose=rd.vector(doc, "initial_pose", "initial_pose", 3),
         control=control, robot=robot, can=can, zenoh=zenoh, autostart=autostart,
         feedback_timeout=feedback, staleness=staleness, sensing_range=sensing,
-        arm_timeout=arm, mavlink=MavlinkSettings.from_table(rd.table(doc, "mavlink"), where))
+        arm_timeout=arm, mavlink=MavlinkSettings.from_table(rd.table(doc, "mavlink"), where),
+        realtime_priority=rd.integer(doc, "realtime_priority", "realtime_priority", 0,
+                                     lo=0, hi=99))
 
 
 def load_settings(path: str | Path) -> AgentSettings:
@@ -222,7 +226,8 @@ def settings_to_toml(s: AgentSettings) -> str:
     """The TOML text of ``s`` (what :func:`load_settings` reads back to an equal object)."""
     lines = [f"robot_id = {s.robot_id}", f"swarm = {_toml_value(s.swarm)}",
              f"initial_pose = {_toml_value(list(s.initial_pose))}",
-             f"autostart = {_toml_value(s.autostart)}"]
+             f"autostart = {_toml_value(s.autostart)}",
+             f"realtime_priority = {s.realtime_priority}"]
     tables = {"control": dataclasses.asdict(s.control), "robot": dataclasses.asdict(s.robot),
               "can": {k: v for k, v in dataclasses.asdict(s.can).items() if v is not None},
               "zenoh": {k: v for k, v in dataclasses.asdict(s.zenoh).items() if v is not None},

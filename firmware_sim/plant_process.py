@@ -12,6 +12,7 @@ machine delays the world's updates but never slows its clock.
 from __future__ import annotations
 
 import logging
+import math
 import signal
 import time
 from typing import Callable
@@ -35,21 +36,29 @@ def _stop_on_signals(stop: Callable[[], None]) -> None:
         signal.signal(sig, lambda *_: stop())
 
 
-def run_drivers_only(drivers: DriverPair, dt: float = 0.001,
+def run_drivers_only(drivers: DriverPair, rate: float = 200.0,
                      max_ticks: int | None = None,
                      publish_wheels: Callable[..., None] | None = None,
-                     publish_every: int = 5) -> None:
-    """Serve ``drivers`` until a signal (or ``max_ticks``). ``publish_wheels(right_pos,
-    left_pos, right_vel, left_vel, stamp)``, when given, is called every ``publish_every``
-    ticks, for a world simulated on another host."""
+                     publish_period: float = 0.01) -> None:
+    """Serve ``drivers`` at ``rate`` [Hz] until a signal (or ``max_ticks``); the axes advance
+    by the time that really passed (at most MAX_STEP after a stall). ``publish_wheels(
+    right_pos, left_pos, right_vel, left_vel, stamp)``, when given, is called every
+    ``publish_period`` [s], for a world simulated on another host."""
+    if not (math.isfinite(rate) and 0 < rate <= 10000):
+        raise ValueError(f"drivers' loop rate must be in (0, 10000] Hz, got {rate!r}")
     clock = SystemClock()
-    loop = FixedRateLoop(dt, clock)
+    loop = FixedRateLoop(1.0 / rate, clock)
     _stop_on_signals(loop.stop)
+    last = [clock.monotonic()]
+    next_publish = [last[0]]
 
     def tick(k: int, deadline: float) -> None:
-        drivers.service(clock.monotonic())
-        drivers.step(dt)
-        if publish_wheels is not None and k % publish_every == 0:
+        now = clock.monotonic()
+        drivers.service(now)
+        drivers.step(min(now - last[0], MAX_STEP))
+        last[0] = now
+        if publish_wheels is not None and now >= next_publish[0]:
+            next_publish[0] = max(next_publish[0] + publish_period, now)
             publish_wheels(*drivers.wheel_state(), clock.wall())
 
     try:

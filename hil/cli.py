@@ -79,7 +79,11 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
                        robots_per_plant=args.robots_per_plant, live=not args.no_live,
                        gcs_port=args.gcs_port, near_radius=args.near_radius,
                        mavlink_key=str(Path(args.mavlink_key).resolve()) if args.mavlink_key
-                       else None)
+                       else None, realtime_priority=args.realtime_priority)
+    if not 0 <= opts.realtime_priority <= 99:
+        print(f"boundswarm sitl: --realtime-priority must be 0..99, got "
+              f"{opts.realtime_priority}", file=sys.stderr)
+        return 2
     if opts.mavlink_key:
         from transport.mavlink_signing import load_signing_key
         try:
@@ -269,7 +273,7 @@ def cmd_plant(args: argparse.Namespace, console: Console) -> int:
         console.print(f"emulated drivers (nodes {args.left_node} left, {args.right_node} "
                       f"right) on {args.can_interface} {args.can_channel or ''}; Ctrl-C stops")
         if conf is None:
-            run_drivers_only(drivers)
+            run_drivers_only(drivers, rate=args.rate)
             return EXIT_OK
         if not (args.robot and args.swarm):
             raise ValueError("plant --drivers-only with zenoh needs --robot and --swarm")
@@ -285,7 +289,7 @@ def cmd_plant(args: argparse.Namespace, console: Console) -> int:
             pub.put(WheelsMsg(args.robot, seq[0], stamp, right_pos, left_pos, right_vel,
                               left_vel).encode())
         try:
-            run_drivers_only(drivers, publish_wheels=publish)
+            run_drivers_only(drivers, rate=args.rate, publish_wheels=publish)
         finally:
             session.close()
         return EXIT_OK
@@ -355,6 +359,9 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--mavlink-key", metavar="FILE",
                       help="MAVLink 2 signing key of every agent (32 bytes, or a passphrase "
                            "as MAVProxy's 'signing key' hashes it); unsigned commands refused")
+    sitl.add_argument("--realtime-priority", type=int, default=0, metavar="P",
+                      help="agents' control loops run SCHED_FIFO at priority P (1..99; needs "
+                           "root or RLIMIT_RTPRIO; 0: normal scheduling)")
     sitl.add_argument("--near-radius", type=float, default=0.0, metavar="M",
                       help="agents take full-rate states only from robots within M metres "
                            "and 5 Hz beacons from the rest (0: every robot at full rate)")
@@ -373,6 +380,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="multi-host SITL: move the robots from the wheel speeds their "
                             "remote drivers publish")
     plant.add_argument("--robot", type=int, help="drivers-only with zenoh: the robot id")
+    plant.add_argument("--rate", type=float, default=200.0, metavar="HZ",
+                       help="drivers-only: loop rate (encoder estimates go out at 100 Hz)")
     plant.add_argument("--zenoh-config", help="zenoh config file (JSON5), e.g. with TLS")
     add_can_options(plant)
     plant.add_argument("--can-port", type=int, help="udp_multicast port of the bus")

@@ -143,6 +143,8 @@ def client_config(m: SwarmManifest, cn: str, prefix: str) -> dict:
             "transport": {"link": {"tls": _tls(prefix, cn, "client")}}}
 
 
+REALTIME_PRIORITY = 40      # SCHED_FIFO priority of the control loop on robot computers
+
 UNIT = """[Unit]
 Description=boundswarm agent of robot {id}
 Documentation=https://pypi.org/project/boundswarm/
@@ -153,6 +155,8 @@ Wants=network-online.target
 Type=notify
 NotifyAccess=main
 User=boundswarm
+# the control loop thread runs SCHED_FIFO (agent.toml realtime_priority)
+LimitRTPRIO={rtprio}
 WorkingDirectory={etc}
 ExecStartPre=+/usr/sbin/ip link set {can} down
 ExecStartPre=+/usr/sbin/ip link set {can} up type can bitrate {bitrate} restart-ms 100
@@ -252,11 +256,12 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
             control=sc.control, robot=sc.robot,
             can=CanSettings(interface="socketcan", channel=r.can_interface, bitrate=r.bitrate),
             zenoh=ZenohSettings(mode="client", connect=(), config="zenoh.json5"),
-            autostart=True, sensing_range=sc.sensing_range,
+            autostart=True, sensing_range=sc.sensing_range, realtime_priority=REALTIME_PRIORITY,
             mavlink=MavlinkSettings(url=manifest.mavlink, signing_key_file="mavlink.key"))
         (b / "agent.toml").write_text(settings_to_toml(settings))
         (b / "boundswarm-agent.service").write_text(UNIT.format(
-            id=r.id, etc=etc, prefix=prefix, can=r.can_interface, bitrate=r.bitrate))
+            id=r.id, etc=etc, prefix=prefix, can=r.can_interface, bitrate=r.bitrate,
+            rtprio=REALTIME_PRIORITY))
         install = b / "install.sh"
         install.write_text(INSTALL.format(id=r.id, etc=etc, prefix=prefix))
         install.chmod(0o755)

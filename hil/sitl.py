@@ -55,6 +55,7 @@ class SitlOptions:
     gcs_port: int = 14550               # ground station's UDP port on 127.0.0.1 (0: no MAVLink)
     near_radius: float = 0.0            # m, agents' [zenoh] near_radius (0: every robot)
     mavlink_key: str | None = None      # absolute path of a MAVLink signing key file (all agents)
+    realtime_priority: int = 0          # agents' SCHED_FIFO loop priority (0: normal)
     startup_timeout: float = 40.0       # s
     lead_time: float = 1.5              # s between the mission message and its epoch
     live: bool = True                   # live status table on a terminal
@@ -100,6 +101,7 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
                          zenoh=ZenohSettings(mode="client", connect=(endpoint,),
                                              near_radius=opts.near_radius),
                          autostart=True, sensing_range=sc.sensing_range,
+                         realtime_priority=opts.realtime_priority,
                          mavlink=MavlinkSettings(url=f"udpout:127.0.0.1:{mavlink_port}",
                                                  signing_key_file=opts.mavlink_key))
 

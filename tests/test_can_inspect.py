@@ -116,12 +116,15 @@ def test_log_decode_replay_reproduces_the_frames(tmp_path):
         tx.shutdown()
     assert [(m.arbitration_id, bytes(m.data)) for m in got] == \
         [(m.arbitration_id, bytes(m.data)) for m in frames]
-    t0, r0 = frames[0].timestamp, got[0].timestamp
-    lag = [abs((g.timestamp - r0) - (f.timestamp - t0)) for f, g in zip(frames, got)]
-    # the log's timing is kept: median lag under 1 ms; a stall of this shared machine may
-    # delay a few frames, after which replay catches up with the log's clock
-    late = sum(x > 0.005 for x in lag)
-    assert sorted(lag)[len(lag) // 2] < 0.001 and late < len(lag) // 10, (late, max(lag))
+    # the log's timing is kept: each frame's arrival minus its log time is the same offset
+    # (within 1 ms) for at least 90 % of the frames; a stall of this shared machine may delay
+    # a few frames, after which replay catches up with the log's clock. Sending everything
+    # at once would spread the offsets over the log's 0.3 s.
+    offsets = sorted(g.timestamp - f.timestamp for f, g in zip(frames, got))
+    median = offsets[len(offsets) // 2]
+    on_time = sum(abs(o - median) < 0.001 for o in offsets)
+    assert on_time >= 0.9 * len(offsets), (on_time, len(offsets), offsets[0] - median,
+                                           offsets[-1] - median)
 
 
 def test_replay_refuses_commands_while_an_armed_agent_writes(tmp_path):

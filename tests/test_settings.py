@@ -9,7 +9,8 @@ BASE = {"robot_id": 3, "swarm": "demo", "initial_pose": [1.0, 2.0, 0.5]}
 
 def test_round_trip_through_toml(tmp_path):
     s = AgentSettings(robot_id=7, swarm="s", initial_pose=(1.0, -2.0, 3.0), autostart=True,
-                      can=CanSettings(interface="socketcan", channel="can0"))
+                      can=CanSettings(interface="socketcan", channel="can0"),
+                      realtime_priority=30)
     path = tmp_path / "robot.toml"
     path.write_text(settings_to_toml(s))
     assert load_settings(path) == s
@@ -29,6 +30,8 @@ def test_round_trip_through_toml(tmp_path):
     ({"timeouts": {"feedback": 0.01}}, r"\[timeouts\] feedback"),
     ({"control": {"period": 0.1}}, r"\[control\]"),
     ({"motors": {}}, "top level"),
+    ({"realtime_priority": 100}, "realtime_priority"),
+    ({"zenoh": {"near_radius": 2.0}}, r"\[zenoh\] near_radius"),
 ])
 def test_bad_fields_are_named(change, field):
     doc = {**BASE, **change}
@@ -42,3 +45,22 @@ def test_missing_required_fields():
         doc = {k: v for k, v in BASE.items() if k != key}
         with pytest.raises(ConfigError, match=f"{key}: missing"):
             parse_settings(doc, "robot.toml")
+
+
+@pytest.mark.skipif(__import__("os").geteuid() != 0, reason="SCHED_FIFO needs root here")
+def test_realtime_priority_applies_to_the_calling_thread_only():
+    import os
+    import threading
+
+    from agent.process import _realtime
+    got = {}
+
+    def loop_thread():
+        got["granted"] = _realtime(10)
+        got["policy"] = os.sched_getscheduler(0)
+
+    t = threading.Thread(target=loop_thread)
+    t.start()
+    t.join()
+    assert got == {"granted": True, "policy": os.SCHED_FIFO}
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER      # this thread untouched
