@@ -10,13 +10,17 @@ in a bounded ring so a long run does not grow memory.
 """
 from __future__ import annotations
 
+import logging
 import math
+import os
 import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable, Protocol
 
 import numpy as np
+
+log = logging.getLogger(__name__)
 
 
 class Clock(Protocol):
@@ -100,3 +104,16 @@ class FixedRateLoop:
             next_k = max(k + 1, math.floor((done - start) / self.period) + 1)
             self.stats.overruns += next_k - (k + 1)
             k = next_k
+
+
+def use_realtime(priority: int) -> bool:
+    """Put the calling (loop) thread under SCHED_FIFO at ``priority`` (1..99); threads made
+    before, e.g. Zenoh's, keep normal scheduling. Without the right (root, CAP_SYS_NICE or
+    RLIMIT_RTPRIO) the loop runs on with normal scheduling and a warning."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError) as exc:
+        log.warning("realtime_priority %d not granted (%s): normal scheduling", priority, exc)
+        return False
+    log.info("loop thread: SCHED_FIFO priority %d", priority)
+    return True

@@ -10,13 +10,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import os
 import signal
 import time
 from pathlib import Path
 
 from agent.config import ControlParams
-from agent.loop import FixedRateLoop, SystemClock
+from agent.loop import FixedRateLoop, SystemClock, use_realtime
 from agent.node import Agent, AgentMode
 from agent.settings import AgentSettings
 from agent.systemd import Notifier
@@ -59,19 +58,6 @@ class AgentVehicle:
         self.agent.s = dataclasses.replace(self.agent.s, control=params)
 
 
-def _realtime(priority: int) -> bool:
-    """Put the calling (loop) thread under SCHED_FIFO at ``priority``; Zenoh's threads, made
-    before, keep normal scheduling. Without the right (root, CAP_SYS_NICE or RLIMIT_RTPRIO)
-    the loop runs on with normal scheduling and a warning."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (PermissionError, OSError) as exc:
-        log.warning("realtime_priority %d not granted (%s): normal scheduling", priority, exc)
-        return False
-    log.info("control loop thread: SCHED_FIFO priority %d", priority)
-    return True
-
-
 def run_agent(settings: AgentSettings, stats_path: Path | None = None,
               max_ticks: int | None = None) -> dict:
     """Run one agent until a signal (or ``max_ticks``); returns its statistics."""
@@ -91,7 +77,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         agent = Agent(s, motor, swarm, clock)
         link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
                          clock.wall)
-        realtime = s.realtime_priority > 0 and _realtime(s.realtime_priority)
+        realtime = s.realtime_priority > 0 and use_realtime(s.realtime_priority)
         loop = FixedRateLoop(s.control.period, clock)
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: loop.stop())

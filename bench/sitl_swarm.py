@@ -1,6 +1,7 @@
 """SITL swarm timing at 50 Hz for growing swarms (prints a table).
 
     .venv/bin/python bench/sitl_swarm.py [--sizes 9 18 30 50] [--duration 15] [--near-radius 12]
+                                     [--realtime-priority 10]
 
 Each size runs ``boundswarm sitl`` on a grid formation (spacing 5 m, no obstacles) whose
 robots start scattered behind their places, with every agent a separate process, the plant
@@ -46,6 +47,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[9, 18, 30, 50])
     parser.add_argument("--duration", type=float, default=15.0)
+    parser.add_argument("--realtime-priority", type=int, default=10,
+                        help="agents' SCHED_FIFO loop priority (0: normal scheduling)")
     parser.add_argument("--near-radius", type=float, default=0.0,
                         help="agents' near radius [m] (0: full-rate states of every robot)")
     args = parser.parse_args()
@@ -58,7 +61,8 @@ def main() -> None:
             sc.write_text(scenario_text(n, args.duration))
             out = Path(tmp) / "run"
             cmd = [sys.executable, "-m", "hil.cli", "sitl", str(sc), "--out", str(out),
-                   "--no-live", "--near-radius", str(args.near_radius)]
+                   "--no-live", "--near-radius", str(args.near_radius),
+                   "--realtime-priority", str(args.realtime_priority)]
             proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
             if not (out / "metrics.json").exists():
                 print(f"{n:>6} failed (exit {proc.returncode}): {proc.stdout[-500:]}")

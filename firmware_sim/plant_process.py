@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from agent.loop import FixedRateLoop, SystemClock
+from agent.loop import FixedRateLoop, SystemClock, use_realtime
 from firmware_sim.odrive_sim import DriverPair
 from firmware_sim.sitl_plant import PlantRobot, SitlPlant
 from transport.canbus import open_bus
@@ -97,7 +97,7 @@ class RemoteWheels:
 
 
 def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: float,
-               clock: SystemClock) -> dict:
+               clock: SystemClock, realtime_priority: int = 0) -> dict:
     """Publish truth and obstacles of ``robots`` while moving them in real time until a
     signal; the physics steps by the time that really passed (a late tick must not slow the
     world). Returns the loop statistics."""
@@ -107,6 +107,8 @@ def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: floa
                       lambda kind, rid, data: publishers[(kind, rid)].put(data))
     loop = FixedRateLoop(dt, clock)
     _stop_on_signals(loop.stop)
+    if realtime_priority:
+        use_realtime(realtime_priority)
     last = [clock.monotonic()]
 
     def tick(k: int, deadline: float) -> None:
@@ -140,8 +142,10 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
 
 def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str],
                    can_interface: str, can_channel: str | None, can_ports: dict[int, int],
-                   dt: float = 0.005, watchdog: float = 0.1) -> dict:
-    """Host robots ``robot_ids`` of ``scenario`` until a signal; returns loop statistics."""
+                   dt: float = 0.005, watchdog: float = 0.1, realtime_priority: int = 0) -> dict:
+    """Host robots ``robot_ids`` of ``scenario`` until a signal; returns loop statistics.
+    ``realtime_priority`` > 0: the plant loop runs SCHED_FIFO (emulated hardware must not
+    starve when the agents load the machine)."""
     clock = SystemClock()
     t0 = time.monotonic()
     keys = Keys(swarm)
@@ -156,7 +160,7 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
             drivers.configure(vel_limit=r.wheel_speed_limit, ramp=r.wheel_ramp,
                               watchdog=watchdog)
             robots.append(PlantRobot(rid, np.array(scenario.poses[index[rid]], float), drivers))
-        stats = _run_plant(session, keys, robots, scenario, dt, clock)
+        stats = _run_plant(session, keys, robots, scenario, dt, clock, realtime_priority)
         stats["cpu_seconds"] = time.process_time()
         stats["wall_seconds"] = time.monotonic() - t0
         stats["watchdog_trips"] = {rb.robot_id: sum(a.watchdog_trips

@@ -311,7 +311,8 @@ def cmd_plant(args: argparse.Namespace, console: Console) -> int:
     if unknown:
         raise ValueError(f"plant: robots {unknown} are not in {args.scenario}")
     stats = run_sitl_plant(sc, ids, args.swarm, args.zenoh_connect, args.can_interface,
-                           args.can_channel, _can_ports(args, ids), watchdog=args.watchdog)
+                           args.can_channel, _can_ports(args, ids), watchdog=args.watchdog,
+                           realtime_priority=args.realtime_priority)
     if args.stats:
         Path(args.stats).write_text(json.dumps(stats, indent=2) + "\n")
     return EXIT_OK
@@ -359,9 +360,9 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--mavlink-key", metavar="FILE",
                       help="MAVLink 2 signing key of every agent (32 bytes, or a passphrase "
                            "as MAVProxy's 'signing key' hashes it); unsigned commands refused")
-    sitl.add_argument("--realtime-priority", type=int, default=0, metavar="P",
+    sitl.add_argument("--realtime-priority", type=int, default=10, metavar="P",
                       help="agents' control loops run SCHED_FIFO at priority P (1..99; needs "
-                           "root or RLIMIT_RTPRIO; 0: normal scheduling)")
+                           "root or RLIMIT_RTPRIO, else a warning; 0: normal scheduling)")
     sitl.add_argument("--near-radius", type=float, default=0.0, metavar="M",
                       help="agents take full-rate states only from robots within M metres "
                            "and 5 Hz beacons from the rest (0: every robot at full rate)")
@@ -380,6 +381,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="multi-host SITL: move the robots from the wheel speeds their "
                             "remote drivers publish")
     plant.add_argument("--robot", type=int, help="drivers-only with zenoh: the robot id")
+    plant.add_argument("--realtime-priority", type=int, default=0, choices=range(0, 100),
+                       metavar="P", help="SITL plant: its loop runs SCHED_FIFO at P (0: normal)")
     plant.add_argument("--rate", type=float, default=200.0, metavar="HZ",
                        help="drivers-only: loop rate (encoder estimates go out at 100 Hz)")
     plant.add_argument("--zenoh-config", help="zenoh config file (JSON5), e.g. with TLS")

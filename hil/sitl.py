@@ -225,6 +225,8 @@ def _start_plants(children: Children, sc: Scenario, opts: SitlOptions, swarm: st
                 "--swarm", swarm, "--zenoh-connect", endpoint,
                 "--can-interface", opts.can_interface,
                 "--stats", str(out / "logs" / f"plant_{k // size}.json")]
+        if opts.realtime_priority:      # the emulated hardware ahead of the agents
+            args += ["--realtime-priority", str(min(opts.realtime_priority + 1, 99))]
         if opts.can_interface == "udp_multicast":
             args += ["--can-channel", opts.can_channel or "ff11::b5:1",
                      "--can-base-port", str(opts.can_base_port)]

@@ -52,11 +52,11 @@ def test_realtime_priority_applies_to_the_calling_thread_only():
     import os
     import threading
 
-    from agent.process import _realtime
+    from agent.loop import use_realtime
     got = {}
 
     def loop_thread():
-        got["granted"] = _realtime(10)
+        got["granted"] = use_realtime(10)
         got["policy"] = os.sched_getscheduler(0)
 
     t = threading.Thread(target=loop_thread)
