@@ -49,7 +49,7 @@ def arc_step(x: float, y: float, theta: float, dist: float, dtheta: float
     half = 0.5 * dtheta
     sinc = 1.0 - half * half / 6.0 if abs(half) < 1e-4 else math.sin(half) / half
     mid = theta + half
-    wrapped = (theta + dtheta + math.pi) % TWO_PI - math.pi
+    wrapped = (theta + dtheta + math.pi) % math.tau - math.pi
     return (x + dist * sinc * math.cos(mid), y + dist * sinc * math.sin(mid),
             math.pi if wrapped == -math.pi else wrapped)
 

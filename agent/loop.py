@@ -112,7 +112,7 @@ def use_realtime(priority: int) -> bool:
     RLIMIT_RTPRIO) the loop runs on with normal scheduling and a warning."""
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (PermissionError, OSError) as exc:
+    except OSError as exc:                      # PermissionError: not allowed
         log.warning("realtime_priority %d not granted (%s): normal scheduling", priority, exc)
         return False
     log.info("loop thread: SCHED_FIFO priority %d", priority)

@@ -44,8 +44,9 @@ def run_drivers_only(drivers: DriverPair, rate: float = 200.0,
     by the time that really passed (at most MAX_STEP after a stall). ``publish_wheels(
     right_pos, left_pos, right_vel, left_vel, stamp)``, when given, is called every
     ``publish_period`` [s], for a world simulated on another host."""
-    if not (math.isfinite(rate) and 0 < rate <= 10000):
-        raise ValueError(f"drivers' loop rate must be in (0, 10000] Hz, got {rate!r}")
+    if not (math.isfinite(rate) and 100 <= rate <= 10000):
+        raise ValueError(f"drivers' loop rate must be 100..10000 Hz (encoder estimates go out "
+                         f"at 100 Hz), got {rate!r}")
     clock = SystemClock()
     loop = FixedRateLoop(1.0 / rate, clock)
     _stop_on_signals(loop.stop)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 import time
 from pathlib import Path
@@ -91,7 +92,8 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
         except (OSError, ValueError) as exc:
             print(f"boundswarm sitl: --mavlink-key: {exc}", file=sys.stderr)
             return 2
-    if opts.near_radius != 0 and opts.near_radius < sc.sensing_range + 1.0:
+    if not math.isfinite(opts.near_radius) or (
+            opts.near_radius != 0 and opts.near_radius < sc.sensing_range + 1.0):
         print(f"boundswarm sitl: --near-radius must be 0 or at least the sensing range + 1 m "
               f"({sc.sensing_range + 1.0:g} m), got {opts.near_radius:g}", file=sys.stderr)
         return 2
@@ -118,7 +120,9 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
                              for r, st in run.agent_stats.items()},
         "failsafes": {r: st["failsafe"] for r, st in run.agent_stats.items() if st["failsafe"]},
         "can": {r: st["can"] for r, st in run.agent_stats.items()},
-        "zenoh_dropped": {r: st["zenoh"]["states"]["dropped"]
+        "zenoh_dropped": {r: {**st["zenoh"]["states"]["dropped"],
+                              **{f"beacon_{k}": v for k, v in
+                                 st["zenoh"].get("beacons", {}).get("dropped", {}).items()}}
                           for r, st in run.agent_stats.items()},
         "watchdog_trips": {k: v for p in run.plant_stats
                            for k, v in p.get("watchdog_trips", {}).items()},
@@ -267,6 +271,9 @@ def cmd_plant(args: argparse.Namespace, console: Console) -> int:
             session_config("client", connect=args.zenoh_connect) if args.zenoh_connect
             else None)
     if args.drivers_only:
+        if not (math.isfinite(args.rate) and 100 <= args.rate <= 10000):
+            raise ValueError(f"--rate must be 100..10000 Hz (encoder estimates go out at "
+                             f"100 Hz), got {args.rate:g}")
         bus = open_bus(args.can_interface, args.can_channel, port=args.can_port)
         drivers = DriverPair(bus, right_node=args.right_node, left_node=args.left_node)
         drivers.configure(vel_limit=args.vel_limit, ramp=args.ramp, watchdog=args.watchdog)

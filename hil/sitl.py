@@ -55,7 +55,7 @@ class SitlOptions:
     gcs_port: int = 14550               # ground station's UDP port on 127.0.0.1 (0: no MAVLink)
     near_radius: float = 0.0            # m, agents' [zenoh] near_radius (0: every robot)
     mavlink_key: str | None = None      # absolute path of a MAVLink signing key file (all agents)
-    realtime_priority: int = 0          # agents' SCHED_FIFO loop priority (0: normal)
+    realtime_priority: int = 10         # agents' SCHED_FIFO loop priority, plant's + 1 (0: normal)
     startup_timeout: float = 40.0       # s
     lead_time: float = 1.5              # s between the mission message and its epoch
     live: bool = True                   # live status table on a terminal

@@ -13,8 +13,10 @@ Used by the tests of the socketcan path and by ``bench/``; needs the Debian pack
 Debian 12's UML kernel (6.1) cannot boot on recent host kernels with large FPU state
 ("ptrace set fp regs failed, errno = 14"). ``python -m hil.uml ensure`` boots the installed
 kernel once and, when it fails that way, fetches a newer UML kernel and the C library it
-needs from Debian testing (each checked against the SHA256 in Debian's Packages index) into
-``.venv/uml``, and points its ELF interpreter at that library with ``patchelf``.
+needs from Debian testing into ``.venv/uml`` and points its ELF interpreter at that library
+with ``patchelf``. The chain is Debian's own: the suite's InRelease is checked with ``gpgv``
+against the archive keyring, the Packages index against the SHA256 InRelease gives, each
+package against the SHA256 in that index.
 """
 from __future__ import annotations
 
@@ -35,7 +37,8 @@ from pathlib import Path
 
 SYSTEM_KERNEL = "linux"
 LOCAL = Path(__file__).resolve().parent.parent / ".venv" / "uml"   # fetched kernel lives here
-MIRROR = "http://deb.debian.org/debian"
+MIRROR = "https://deb.debian.org/debian"
+KEYRING = "/usr/share/keyrings/debian-archive-keyring.gpg"     # Debian's debian-archive-keyring
 SUITE = "testing"
 FETCHED_PACKAGES = ("user-mode-linux", "libc6")
 MODULES = ("net/can/can.ko", "net/can/can-raw.ko", "drivers/net/can/dev/can-dev.ko",
@@ -129,7 +132,7 @@ def boots() -> str | None:
     """None when the chosen kernel boots and runs a script here, else why not."""
     try:
         r = run_script("echo ok", vcans=0, timeout=60, mem_mb=128)
-    except (UmlUnavailable, TimeoutError) as exc:
+    except (UmlUnavailable, TimeoutError, OSError) as exc:
         return str(exc)
     if r.returncode == 0 and r.output.strip() == "ok":
         return None
@@ -144,13 +147,42 @@ def usable() -> str | None:
     return f"{reason}; try: python -m hil.uml ensure" if reason else None
 
 
+def _download(url: str, timeout: float = 300) -> bytes:
+    with urllib.request.urlopen(url, timeout=timeout) as resp:
+        return resp.read()
+
+
+def _release_sha256(suite: str, path: str) -> str:
+    """The SHA256 of ``path`` (e.g. ``main/binary-amd64/Packages.xz``) in the suite's
+    InRelease, whose signature ``gpgv`` checks against Debian's archive keyring."""
+    if shutil.which("gpgv") is None or not Path(KEYRING).is_file():
+        raise UmlUnavailable(f"gpgv and {KEYRING} are needed to verify Debian's index "
+                             "(apt-get install gpgv debian-archive-keyring)")
+    signed = _download(f"{MIRROR}/dists/{suite}/InRelease", timeout=120)
+    check = subprocess.run(["gpgv", "--keyring", KEYRING, "--output", "-", "-"], input=signed,
+                           capture_output=True)
+    if check.returncode != 0:
+        raise ValueError(f"Debian {suite} InRelease: bad signature: "
+                         f"{check.stderr.decode(errors='replace').strip()[-300:]}")
+    section = check.stdout.decode().split("\nSHA256:\n", 1)[-1]
+    for line in section.splitlines():
+        if not line.startswith(" "):
+            break
+        digest, _, name = line.split()
+        if name == path:
+            return digest
+    raise ValueError(f"Debian {suite} InRelease lists no SHA256 for {path}")
+
+
 def _packages_index(suite: str) -> dict[str, dict[str, str]]:
-    """Debian's Packages index for amd64: {package: {field: value}} (first stanza wins)."""
-    url = f"{MIRROR}/dists/{suite}/main/binary-amd64/Packages.xz"
-    with urllib.request.urlopen(url, timeout=120) as resp:
-        text = lzma.decompress(resp.read()).decode()
+    """Debian's Packages index for amd64, verified: {package: {field: value}}."""
+    path = "main/binary-amd64/Packages.xz"
+    want = _release_sha256(suite, path)
+    data = _download(f"{MIRROR}/dists/{suite}/{path}", timeout=120)
+    if hashlib.sha256(data).hexdigest() != want:
+        raise ValueError(f"Debian {suite} {path}: SHA256 does not match InRelease")
     index: dict[str, dict[str, str]] = {}
-    for stanza in text.split("\n\n"):
+    for stanza in lzma.decompress(data).decode().split("\n\n"):
         fields = dict(line.split(": ", 1) for line in stanza.splitlines()
                       if ": " in line and not line.startswith(" "))
         if "Package" in fields:
@@ -187,8 +219,7 @@ def fetch(dest: Path = LOCAL, suite: str = SUITE) -> Path:
     for package in FETCHED_PACKAGES:
         fields = index[package]
         print(f"uml: fetching {package} {fields['Version']} from Debian {suite}", flush=True)
-        with urllib.request.urlopen(f"{MIRROR}/{fields['Filename']}", timeout=300) as resp:
-            data = resp.read()
+        data = _download(f"{MIRROR}/{fields['Filename']}")
         if hashlib.sha256(data).hexdigest() != fields["SHA256"]:
             raise ValueError(f"{package}: SHA256 does not match Debian's index")
         _extract_deb(data, root)
@@ -214,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     try:
         fetch()
-    except (OSError, ValueError, KeyError, subprocess.CalledProcessError) as exc:
+    except (OSError, ValueError, KeyError, UmlUnavailable, subprocess.CalledProcessError) as exc:
         shutil.rmtree(LOCAL, ignore_errors=True)
         print(f"uml: could not fetch a newer kernel: {exc}")
         return 1

@@ -196,9 +196,9 @@ def test_a_robot_cannot_publish_on_another_robots_key(bundles, router):
 
 
 class TamperingLink:
-    """A TCP relay on 127.0.0.1 to ``upstream``; once ``attack`` is set, it flips a bit in
-    each chunk going upstream ("flip": a tampered TLS record) or sends each chunk twice
-    ("repeat": a replayed record). Closed with every socket by :meth:`close`."""
+    """A TCP relay on 127.0.0.1 to ``upstream`` that forwards whole TLS records; once
+    ``attack`` is set, it flips a bit in each record going upstream ("flip": tampered) or
+    sends each application-data record twice ("repeat": replayed). :meth:`close` ends it."""
 
     def __init__(self, upstream: int, mode: str):
         self.upstream, self.mode, self.attack = upstream, mode, False
@@ -211,21 +211,28 @@ class TamperingLink:
         while True:
             try:
                 down, _ = self.server.accept()
+                up = socket.create_connection(("127.0.0.1", self.upstream))
             except OSError:
                 return
-            up = socket.create_connection(("127.0.0.1", self.upstream))
             self.socks += [down, up]
             threading.Thread(target=self._pump, args=(down, up, True), daemon=True).start()
             threading.Thread(target=self._pump, args=(up, down, False), daemon=True).start()
 
     def _pump(self, src: socket.socket, dst: socket.socket, upstream: bool) -> None:
+        buf = b""
         try:
             while data := src.recv(65536):
-                if upstream and self.attack and self.mode == "flip":
-                    data = data[:-1] + bytes([data[-1] ^ 0x01])
-                dst.sendall(data)
-                if upstream and self.attack and self.mode == "repeat":
-                    dst.sendall(data)
+                buf += data
+                # a TLS record: type (1 byte), version (2), length (2), then length bytes
+                while len(buf) >= 5 and len(buf) >= 5 + int.from_bytes(buf[3:5], "big"):
+                    end = 5 + int.from_bytes(buf[3:5], "big")
+                    record, buf = buf[:end], buf[end:]
+                    attacked = upstream and self.attack
+                    if attacked and self.mode == "flip":
+                        record = record[:-1] + bytes([record[-1] ^ 0x01])
+                    dst.sendall(record)
+                    if attacked and self.mode == "repeat" and record[0] == 23:
+                        dst.sendall(record)
         except OSError:
             pass
         for sock in (src, dst):
@@ -235,6 +242,10 @@ class TamperingLink:
                 pass
 
     def close(self) -> None:
+        try:
+            self.server.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
         for sock in self.socks:
             sock.close()
 

@@ -166,7 +166,7 @@ def test_near_states_subscribe_to_near_robots_only(sessions):
         c = me.counters()
         assert c["near"] == [2]                                   # robot 3 is 50 m away
         assert set(me.neighbours()) == {2, 3}                     # ... but known from beacons
-        assert c["states"]["accepted"] > 40                       # ~50 Hz from robot 2
+        assert c["states"]["accepted"] > 20                       # ~50 Hz from robot 2
         assert 4 <= c["beacons"]["accepted"] <= 25                # 5 Hz from each of 2, 3
         # robot 3 comes near, robot 2 goes far beyond radius + hysteresis
         round_(30.0, 4.0, 1.0)

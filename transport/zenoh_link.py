@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
+import time
 from collections import Counter
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -311,7 +312,7 @@ class SwarmLink:
     def publish(self, state: StateMsg) -> None:
         payload = state.encode()
         self._pub.put(payload)
-        now = self._clock()
+        now = time.monotonic()          # schedules only: a step of the wall clock must not stall them
         if now >= self._beacon_due:
             self._beacon.put(payload)
             self._beacon_due = now + self.BEACON_PERIOD
