@@ -36,6 +36,7 @@ from hil.processes import wait_until  # noqa: E402
 from transport.mavlink_params import PARAMS  # noqa: E402
 from transport.payloads import PayloadError, StateFlags, StateMsg, TruthMsg  # noqa: E402
 from transport.zenoh_link import Keys, open_session, session_config  # noqa: E402
+from procs import alive  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = ROOT / "scenarios" / "sitl_small.toml"      # robots 1, 2, 3
@@ -50,18 +51,6 @@ def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    try:                                       # a zombie of ours is not running
-        done, _ = os.waitpid(pid, os.WNOHANG)
-        return done == 0
-    except ChildProcessError:
-        return True
 
 
 def children_of(pid: int) -> list[int]:

@@ -19,21 +19,10 @@ import zenoh
 from firmware_sim.batch import SimOptions, simulate
 from hil.run_folder import read_run
 from hil.scenario import load_scenario
+from procs import alive
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"
-
-
-def alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    try:                                       # a zombie of ours is not running
-        done, _ = os.waitpid(pid, os.WNOHANG)
-        return done == 0
-    except ChildProcessError:
-        return True
 
 
 class Launcher:
