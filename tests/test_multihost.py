@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parent.parent
 BIN = str(Path(sys.executable).parent / "boundswarm")
 SCENARIO = ROOT / "scenarios" / "sitl_small.toml"
 PAPER = ROOT / "scenarios" / "paper.toml"
+FAULT_RUN = 20.0                    # s of mission in the fault tests (recovery time)
 RELAY_PORT = 7448                   # the delaying relay, on the ground station's address
 MAX_MISSED_PERIODS = 0              # paper scenario, all agents, while the mission runs
 PREFIX = f"bs{os.getpid() % 10000}"
@@ -371,7 +372,7 @@ def test_swarm_across_hosts_with_tls(tmp_path):
 def test_link_fault_on_one_robot(tmp_path):
     """30 % loss on robot 2's link for 4 s early in the run: no distance below a, and the
     swarm converges once the link recovers."""
-    run = run_swarm(tmp_path, fault=Loss(2, 30, 0.5, 4.5))
+    run = run_swarm(tmp_path, fault=Loss(2, 30, 0.5, 4.5), duration=FAULT_RUN)
     m = run["metrics"]
     print("loss fault on", run["fault_on"], brief(m), "ages:",
           {r: st["agent"]["neighbour_age_ms"] for r, st in run["agents"].items()})
@@ -386,7 +387,7 @@ def test_link_delay_on_one_robot(tmp_path):
     in the run, then none: no distance below a, and the swarm converges once the link
     recovers."""
     delay = Delay(2, 200.0, 0.5, 4.5)
-    run = run_swarm(tmp_path, fault=delay)
+    run = run_swarm(tmp_path, fault=delay, duration=FAULT_RUN)
     m, agents = run["metrics"], run["agents"]
     ages = {r: st["agent"]["neighbour_age_ms"] for r, st in agents.items()}
     print("delay fault on", run["fault_on"], brief(m), "ages:", ages, "relayed connections:",
