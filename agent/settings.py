@@ -126,6 +126,14 @@ class AgentSettings:
     realtime_priority: int = 0        # SCHED_FIFO priority of the loop thread (0: normal)
 
 
+def near_radius_problem(near_radius: float, sensing_range: float) -> str | None:
+    """Why ``near_radius`` [m] is not usable with ``sensing_range`` [m], or None."""
+    if near_radius == 0 or (math.isfinite(near_radius) and near_radius >= sensing_range + 1.0):
+        return None
+    return (f"must be 0 or at least the sensing range + 1 m ({sensing_range + 1.0:g} m; "
+            f"0: every robot at full rate), got {near_radius:g}")
+
+
 def parse_settings(doc: dict, where: str) -> AgentSettings:
     rd = TableReader(where)
     rd.only(doc, TOP_KEYS, "top level")
@@ -172,9 +180,8 @@ def parse_settings(doc: dict, where: str) -> AgentSettings:
     s = rd.table(doc, "sensing")
     rd.only(s, {"range"}, "[sensing]")
     sensing = rd.number(s, "range", "[sensing] range", 2.0 * control.c, positive=True)
-    if zenoh.near_radius != 0 and zenoh.near_radius < sensing + 1.0:
-        raise rd.fail("[zenoh] near_radius", f"must be 0 (every robot) or at least the sensing "
-                      f"range + 1 m ({sensing + 1.0:g} m), got {zenoh.near_radius:g}")
+    if problem := near_radius_problem(zenoh.near_radius, sensing):
+        raise rd.fail("[zenoh] near_radius", problem)
 
     autostart = doc.get("autostart", False)
     if not isinstance(autostart, bool):

@@ -78,7 +78,8 @@ def measure(interface: str, channel: str, port: int | None, seconds: float) -> d
 
 def with_drivers(interface: str, channel: str, port: int | None, seconds: float) -> dict:
     args = [sys.executable, "-m", "hil.cli", "plant", "--drivers-only", "--rate", "1000",
-            "--can-interface", interface, "--can-channel", channel] + (["--can-port", str(port)] if port else [])
+            "--can-interface", interface, "--can-channel", channel]
+    args += ["--can-port", str(port)] if port else []
     child = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.DEVNULL,
                              stderr=subprocess.DEVNULL)
     try:

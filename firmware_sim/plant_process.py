@@ -36,6 +36,14 @@ def _stop_on_signals(stop: Callable[[], None]) -> None:
         signal.signal(sig, lambda *_: stop())
 
 
+def check_drivers_rate(rate: float) -> float:
+    """``rate`` [Hz] if the drivers' loop can run at it, else ValueError saying why."""
+    if not (math.isfinite(rate) and 100 <= rate <= 10000):
+        raise ValueError(f"drivers' loop rate must be 100..10000 Hz (encoder estimates go out "
+                         f"at 100 Hz), got {rate:g}")
+    return rate
+
+
 def run_drivers_only(drivers: DriverPair, rate: float = 200.0,
                      max_ticks: int | None = None,
                      publish_wheels: Callable[..., None] | None = None,
@@ -44,11 +52,8 @@ def run_drivers_only(drivers: DriverPair, rate: float = 200.0,
     by the time that really passed (at most MAX_STEP after a stall). ``publish_wheels(
     right_pos, left_pos, right_vel, left_vel, stamp)``, when given, is called every
     ``publish_period`` [s], for a world simulated on another host."""
-    if not (math.isfinite(rate) and 100 <= rate <= 10000):
-        raise ValueError(f"drivers' loop rate must be 100..10000 Hz (encoder estimates go out "
-                         f"at 100 Hz), got {rate!r}")
     clock = SystemClock()
-    loop = FixedRateLoop(1.0 / rate, clock)
+    loop = FixedRateLoop(1.0 / check_drivers_rate(rate), clock)
     _stop_on_signals(loop.stop)
     last = [clock.monotonic()]
     next_publish = [last[0]]

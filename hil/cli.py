@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import sys
 import time
 from pathlib import Path
@@ -68,6 +67,7 @@ def _percentiles(values: list) -> dict:
 
 def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     """The SITL swarm on a scenario, recorded into a run folder."""
+    from agent.settings import near_radius_problem
     from hil.sitl import SitlError, SitlOptions, run_sitl
     from hil.sitl_report import analyse_recording
     sc = load_scenario(args.scenario)
@@ -81,10 +81,6 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
                        gcs_port=args.gcs_port, near_radius=args.near_radius,
                        mavlink_key=str(Path(args.mavlink_key).resolve()) if args.mavlink_key
                        else None, realtime_priority=args.realtime_priority)
-    if not 0 <= opts.realtime_priority <= 99:
-        print(f"boundswarm sitl: --realtime-priority must be 0..99, got "
-              f"{opts.realtime_priority}", file=sys.stderr)
-        return 2
     if opts.mavlink_key:
         from transport.mavlink_signing import load_signing_key
         try:
@@ -92,10 +88,8 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
         except (OSError, ValueError) as exc:
             print(f"boundswarm sitl: --mavlink-key: {exc}", file=sys.stderr)
             return 2
-    if not math.isfinite(opts.near_radius) or (
-            opts.near_radius != 0 and opts.near_radius < sc.sensing_range + 1.0):
-        print(f"boundswarm sitl: --near-radius must be 0 or at least the sensing range + 1 m "
-              f"({sc.sensing_range + 1.0:g} m), got {opts.near_radius:g}", file=sys.stderr)
+    if problem := near_radius_problem(opts.near_radius, sc.sensing_range):
+        print(f"boundswarm sitl: --near-radius {problem}", file=sys.stderr)
         return 2
     started = time.perf_counter()
     try:
@@ -264,16 +258,15 @@ def _can_ports(args: argparse.Namespace, ids: list[int]) -> dict[int, int]:
 def cmd_plant(args: argparse.Namespace, console: Console) -> int:
     """The SITL plant, or one robot's emulated drivers only (HIL bench)."""
     from firmware_sim.odrive_sim import DriverPair
-    from firmware_sim.plant_process import run_drivers_only, run_sitl_plant
+    from firmware_sim.plant_process import (check_drivers_rate, run_drivers_only,
+                                            run_sitl_plant)
     from transport.canbus import open_bus
     from transport.zenoh_link import config_from_file, session_config
     conf = (config_from_file(args.zenoh_config) if args.zenoh_config else
             session_config("client", connect=args.zenoh_connect) if args.zenoh_connect
             else None)
     if args.drivers_only:
-        if not (math.isfinite(args.rate) and 100 <= args.rate <= 10000):
-            raise ValueError(f"--rate must be 100..10000 Hz (encoder estimates go out at "
-                             f"100 Hz), got {args.rate:g}")
+        check_drivers_rate(args.rate)                    # before the bus is opened
         bus = open_bus(args.can_interface, args.can_channel, port=args.can_port)
         drivers = DriverPair(bus, right_node=args.right_node, left_node=args.left_node)
         drivers.configure(vel_limit=args.vel_limit, ramp=args.ramp, watchdog=args.watchdog)
@@ -334,6 +327,13 @@ def add_can_options(p: argparse.ArgumentParser, default_interface: str = "udp_mu
                                          "interface-local group ff11::...")
 
 
+def _priority(text: str) -> int:
+    """A SCHED_FIFO priority option: 0 (normal scheduling) or 1..99."""
+    if not (text.isdigit() and int(text) <= 99):
+        raise argparse.ArgumentTypeError(f"expected 0..99, got {text!r}")
+    return int(text)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="boundswarm", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -367,7 +367,7 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--mavlink-key", metavar="FILE",
                       help="MAVLink 2 signing key of every agent (32 bytes, or a passphrase "
                            "as MAVProxy's 'signing key' hashes it); unsigned commands refused")
-    sitl.add_argument("--realtime-priority", type=int, default=10, metavar="P",
+    sitl.add_argument("--realtime-priority", type=_priority, default=10, metavar="P",
                       help="agents' control loops run SCHED_FIFO at priority P (1..99; needs "
                            "root or RLIMIT_RTPRIO, else a warning; 0: normal scheduling)")
     sitl.add_argument("--near-radius", type=float, default=0.0, metavar="M",
@@ -388,8 +388,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="multi-host SITL: move the robots from the wheel speeds their "
                             "remote drivers publish")
     plant.add_argument("--robot", type=int, help="drivers-only with zenoh: the robot id")
-    plant.add_argument("--realtime-priority", type=int, default=0, choices=range(0, 100),
-                       metavar="P", help="SITL plant: its loop runs SCHED_FIFO at P (0: normal)")
+    plant.add_argument("--realtime-priority", type=_priority, default=0, metavar="P",
+                       help="SITL plant: its loop runs SCHED_FIFO at P (0: normal)")
     plant.add_argument("--rate", type=float, default=200.0, metavar="HZ",
                        help="drivers-only: loop rate (encoder estimates go out at 100 Hz)")
     plant.add_argument("--zenoh-config", help="zenoh config file (JSON5), e.g. with TLS")

@@ -310,6 +310,16 @@ def wait_mission(swarm: Swarm, watch: SwarmWatch) -> None:
         f"the swarm did not start its mission\n{swarm.output()}"
 
 
+def assert_target_holds(watch, held: float, settle: float) -> None:
+    """Robot TARGET reports ARMED | HOLD and, from 1 s after ``held`` [s, UNIX] on, stands
+    still (speeds below 0.05 m/s over ``settle`` s)."""
+    assert wait_until(lambda: watch.latest_flags(TARGET) == StateFlags.ARMED | StateFlags.HOLD,
+                      3.0), watch.latest_flags(TARGET)
+    time.sleep(settle)
+    still = watch.speeds(TARGET, held + 1.0)
+    assert still and max(still) < 0.05, max(still)
+
+
 def test_mavproxy_sees_every_vehicle_and_commands_one(rig):
     """MAVProxy detects robots 1-3; its parameter set, mode changes, disarm and arm of robot
     2 are acknowledged and take effect in robot 2 only."""
@@ -344,11 +354,7 @@ def test_mavproxy_sees_every_vehicle_and_commands_one(rig):
     gcs.expect(r"COMMAND_ACK: DO_SET_MODE: ACCEPTED", ACK, at)
     gcs.expect(r"Mode HOLD", ACK, at)
     held = time.time()
-    assert wait_until(lambda: watch.latest_flags(TARGET) == StateFlags.ARMED | StateFlags.HOLD,
-                      3.0), watch.latest_flags(TARGET)
-    time.sleep(2.5)
-    still = watch.speeds(TARGET, held + 1.0)
-    assert still and max(still) < 0.05, max(still)
+    assert_target_holds(watch, held, settle=2.5)
     for rid in (1, 3):
         assert max(watch.speeds(rid, held + 1.0)) > 0.5
         assert not [f for f in watch.flags(rid, before) if StateFlags.HOLD in f]
@@ -414,12 +420,7 @@ def test_signed_swarm_obeys_only_mavproxy_with_the_key(rig, tmp_path):
     gcs.expect(r"Setup signing key", ACK, at)
     at = gcs.send("mode HOLD")
     gcs.expect(r"COMMAND_ACK: DO_SET_MODE: ACCEPTED", ACK, at)
-    held = time.time()
-    assert wait_until(lambda: watch.latest_flags(TARGET) == StateFlags.ARMED | StateFlags.HOLD,
-                      3.0), watch.latest_flags(TARGET)
-    time.sleep(2.0)
-    still = watch.speeds(TARGET, held + 1.0)
-    assert still and max(still) < 0.05, max(still)
+    assert_target_holds(watch, time.time(), settle=2.0)
 
     left = swarm.stop()
     assert not left, left

@@ -232,6 +232,13 @@ def newest(*maps: Mapping[int, Received[StateMsg]]) -> dict[int, Received[StateM
     return out
 
 
+def _add_counters(total: dict, c: dict) -> None:
+    """Add one subscription's :meth:`Latest.counters` into ``total`` (dropped: a Counter)."""
+    total["received"] += c["received"]
+    total["accepted"] += c["accepted"]
+    total["dropped"].update(c["dropped"])
+
+
 class NearStates:
     """Neighbour states for a large swarm: all beacons, full-rate states of the robots near.
 
@@ -244,11 +251,11 @@ class NearStates:
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
                  clock: Callable[[], float], radius: float, hysteresis: float = 2.0):
         self._session, self._keys, self._clock = session, keys, clock
-        self.robot_id, self.radius, self.hysteresis = robot_id, radius, hysteresis
+        self.radius, self.hysteresis = radius, hysteresis
         self.beacons = Latest(session, keys.beacon("*"), StateMsg.decode, clock,
                               ignore=[robot_id])
         self.near: dict[int, Latest[StateMsg]] = {}
-        self._closed = {"received": 0, "accepted": 0, "dropped": Counter()}
+        self._closed = {"received": 0, "accepted": 0, "dropped": Counter()}  # dropped subs
         self._snapshot: Mapping[int, Received[StateMsg]] = MappingProxyType({})
 
     def snapshot(self) -> Mapping[int, Received[StateMsg]]:
@@ -264,21 +271,14 @@ class NearStates:
                                         self._clock, capacity=8)
             elif rid in self.near and d > self.radius + self.hysteresis:
                 sub = self.near.pop(rid)
-                c = sub.counters()
-                self._closed["received"] += c["received"]
-                self._closed["accepted"] += c["accepted"]
-                self._closed["dropped"].update(c["dropped"])
+                _add_counters(self._closed, sub.counters())
                 sub.close()
 
     def counters(self) -> dict:
         """Full-rate state counters (as :meth:`Latest.counters`), closed subscriptions included."""
-        total = {"received": self._closed["received"], "accepted": self._closed["accepted"],
-                 "dropped": Counter(self._closed["dropped"])}
+        total = {**self._closed, "dropped": Counter(self._closed["dropped"])}
         for sub in self.near.values():
-            c = sub.counters()
-            total["received"] += c["received"]
-            total["accepted"] += c["accepted"]
-            total["dropped"].update(c["dropped"])
+            _add_counters(total, sub.counters())
         return {**total, "dropped": dict(total["dropped"])}
 
     def close(self) -> None:
@@ -298,7 +298,7 @@ class SwarmLink:
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
                  clock: Callable[[], float], near_radius: float = 0.0):
-        self.keys, self.robot_id, self._clock = keys, robot_id, clock
+        self.keys, self.robot_id = keys, robot_id
         self._pub = session.declare_publisher(keys.state(robot_id))
         self._beacon = session.declare_publisher(keys.beacon(robot_id))
         self._beacon_due = self._refocus_due = 0.0
