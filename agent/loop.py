@@ -52,6 +52,8 @@ class LoopStats:
     window: int = 20000
     ticks: int = 0
     overruns: int = 0            # deadlines missed (ticks skipped)
+    overrun_at: list = field(default_factory=list)   # s after loop start: ticks that overran
+                                                     # (the first 20)
     jitter: deque = field(default_factory=deque)     # s, start - deadline
     compute: deque = field(default_factory=deque)    # s, tick duration
 
@@ -71,6 +73,7 @@ class LoopStats:
             return {"p50_ms": float(np.percentile(a, 50)), "p99_ms": float(np.percentile(a, 99)),
                     "max_ms": float(a.max())}
         return {"period_s": self.period, "ticks": self.ticks, "overruns": self.overruns,
+                "overrun_at_s": [round(t, 3) for t in self.overrun_at],
                 "jitter": pct(self.jitter), "compute": pct(self.compute)}
 
 
@@ -102,7 +105,10 @@ class FixedRateLoop:
             self.stats.record(woke - deadline, done - woke)
             # next deadline still in the future; deadlines passed meanwhile are skipped
             next_k = max(k + 1, math.floor((done - start) / self.period) + 1)
-            self.stats.overruns += next_k - (k + 1)
+            if next_k > k + 1:
+                self.stats.overruns += next_k - (k + 1)
+                if len(self.stats.overrun_at) < 20:
+                    self.stats.overrun_at.append(deadline - start)
             k = next_k
 
 

@@ -8,6 +8,7 @@ closed. Loop and agent statistics are written as JSON when asked.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import logging
 import signal
@@ -98,6 +99,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
             overruns[0] = loop.stats.overruns
             notifier.watchdog(clock.monotonic(), on_time and agent.failsafe is None)
 
+        gc.freeze()       # start-up objects are never scanned again: no long GC pause in a tick
         try:
             loop.run(tick, max_ticks=max_ticks)
         finally:

@@ -15,13 +15,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from agent.config import ConfigError, check_braking_margin
-from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
-from hil import run_folder
 from hil.console import LazyProgress, summary_table
-from hil.figures import draw_figures
-from hil.scenario import ScenarioError, load_scenario
 from transport.canbus import BusOpenError
 
 EXIT_OK, EXIT_UNSAFE, EXIT_BAD_INPUT, EXIT_LOST, EXIT_FAILED = 0, 1, 2, 3, 4
@@ -29,6 +24,11 @@ EXIT_OK, EXIT_UNSAFE, EXIT_BAD_INPUT, EXIT_LOST, EXIT_FAILED = 0, 1, 2, 3, 4
 
 def cmd_sim(args: argparse.Namespace, console: Console) -> int:
     """Batch simulation of a scenario into a run folder."""
+    from agent.config import check_braking_margin
+    from firmware_sim.batch import SimOptions, simulate
+    from hil import run_folder
+    from hil.figures import draw_figures
+    from hil.scenario import load_scenario
     sc = load_scenario(args.scenario)
     options = SimOptions(duration=args.duration or sc.duration,
                          sensing_range=sc.sensing_range,
@@ -68,6 +68,9 @@ def _percentiles(values: list) -> dict:
 def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     """The SITL swarm on a scenario, recorded into a run folder."""
     from agent.settings import near_radius_problem
+    from hil import run_folder
+    from hil.figures import draw_figures
+    from hil.scenario import load_scenario
     from hil.sitl import SitlError, SitlOptions, run_sitl
     from hil.sitl_report import analyse_recording
     sc = load_scenario(args.scenario)
@@ -179,6 +182,7 @@ def cmd_mission(args: argparse.Namespace, console: Console) -> int:
     from transport.zenoh_link import (Keys, Presence, config_from_file, open_session,
                                       session_config)
     from hil.processes import wait_until
+    from hil.scenario import load_scenario
     sc = load_scenario(args.scenario)
     conf = (config_from_file(args.config) if args.config
             else session_config("client", connect=args.connect or []))
@@ -228,6 +232,9 @@ def cmd_record(args: argparse.Namespace, console: Console) -> int:
 
 def cmd_report(args: argparse.Namespace, console: Console) -> int:
     """Redraw the figures of a saved run and show its metrics."""
+    from hil import run_folder
+    from hil.figures import draw_figures
+    from hil.scenario import load_scenario
     run = Path(args.run)
     sc = load_scenario(run / run_folder.SCENARIO)
     data = run_folder.read_run(run)
@@ -293,6 +300,7 @@ def cmd_plant(args: argparse.Namespace, console: Console) -> int:
         finally:
             session.close()
         return EXIT_OK
+    from hil.scenario import load_scenario
     if args.world_only:
         from firmware_sim.plant_process import run_world
         if not (args.scenario and args.swarm and conf is not None):
@@ -452,8 +460,8 @@ def main(argv: list[str] | None = None) -> int:
     console = Console()
     try:
         return args.func(args, console)
-    except (ScenarioError, ConfigError, run_folder.RunFolderError, ValueError,
-            BusOpenError, ConnectionError, OSError) as exc:
+    except (ValueError, BusOpenError, ConnectionError, OSError) as exc:
+        # ValueError covers ScenarioError, ConfigError and RunFolderError
         print(f"boundswarm {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

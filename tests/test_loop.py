@@ -50,6 +50,7 @@ def test_overrun_skips_missed_ticks_instead_of_catching_up():
     loop.run(tick, max_ticks=8)
     assert seen == [0, 1, 2, 3, 7, 8, 9, 10]
     assert loop.stats.overruns == 3
+    assert loop.stats.summary()["overrun_at_s"] == [0.06]     # when the late tick started
 
 
 def test_stop_from_inside_a_tick():

@@ -177,19 +177,26 @@ class Latest(Generic[M]):
             self._latest = MappingProxyType(latest)
 
     def snapshot(self) -> Mapping[int, Received[M]]:
-        """The latest message of each robot id (after taking in what has arrived)."""
+        """The latest message of each robot id (after taking in what has arrived; after
+        :meth:`close`, what was held then)."""
         with self._lock:
-            self._drain()
+            if self._sub is not None:
+                self._drain()
             return self._latest
 
     def counters(self) -> dict:
         with self._lock:
-            self._drain()
+            if self._sub is not None:
+                self._drain()
             return {"received": self.received, "accepted": self.accepted,
                     "dropped": dict(self.dropped)}
 
     def close(self) -> None:
-        self._sub.undeclare()
+        """Undeclare the subscription (safe while another thread takes a snapshot)."""
+        with self._lock:
+            if self._sub is not None:
+                self._sub.undeclare()
+                self._sub = None
 
 
 class Presence:
@@ -242,49 +249,79 @@ def _add_counters(total: dict, c: dict) -> None:
 class NearStates:
     """Neighbour states for a large swarm: all beacons, full-rate states of the robots near.
 
-    :meth:`refocus` (own position, metres in the world frame) subscribes to the state key of
-    each robot last seen within ``radius`` and drops the subscription of robots beyond
-    ``radius + hysteresis``. :meth:`snapshot` is like :meth:`Latest.snapshot`: per robot, the
-    newer of its beacon and its state, a mapping never mutated afterwards.
+    A thread of its own revises the subscriptions every ``period`` [s] around the position
+    last given to :meth:`focus` (metres, world frame): it subscribes to the state key of each
+    robot last seen within ``radius`` and drops the subscription of robots beyond ``radius +
+    hysteresis``. Declaring and undeclaring take Zenoh's locks, which its (normally
+    scheduled) threads may hold, so the real-time loop never does it. :meth:`snapshot` is
+    like :meth:`Latest.snapshot`: per robot, the newer of its beacon and its state, a
+    mapping never mutated afterwards.
     """
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
-                 clock: Callable[[], float], radius: float, hysteresis: float = 2.0):
+                 clock: Callable[[], float], radius: float, hysteresis: float = 2.0,
+                 period: float = 0.1):
         self._session, self._keys, self._clock = session, keys, clock
         self.radius, self.hysteresis = radius, hysteresis
         self.beacons = Latest(session, keys.beacon("*"), StateMsg.decode, clock,
                               ignore=[robot_id])
-        self.near: dict[int, Latest[StateMsg]] = {}
+        # replaced whole (never mutated) by the refocus thread, read by the loop
+        self.near: Mapping[int, Latest[StateMsg]] = MappingProxyType({})
         self._closed = {"received": 0, "accepted": 0, "dropped": Counter()}  # dropped subs
+        self._counter_lock = threading.Lock()
         self._snapshot: Mapping[int, Received[StateMsg]] = MappingProxyType({})
+        self._focus: tuple[float, float] | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._refocus_loop, args=(period,),
+                                        name=f"near-refocus-{robot_id}", daemon=True)
+        self._thread.start()
+
+    def focus(self, x: float, y: float) -> None:
+        """Own position [m] to revise the near set around (cheap, never blocks)."""
+        self._focus = (x, y)
 
     def snapshot(self) -> Mapping[int, Received[StateMsg]]:
+        near = self.near
         self._snapshot = MappingProxyType(newest(
-            self.beacons.snapshot(), *(sub.snapshot() for sub in self.near.values())))
+            self.beacons.snapshot(), *(sub.snapshot() for sub in near.values())))
         return self._snapshot
 
+    def _refocus_loop(self, period: float) -> None:
+        while not self._stop.wait(period):
+            if self._focus is not None:
+                self.refocus(*self._focus)
+
     def refocus(self, x: float, y: float) -> None:
+        """Subscribe to the robots now near (x, y) [m], drop those gone far."""
+        near = dict(self.near)
+        gone = []
         for rid, rec in self._snapshot.items():
             d = ((rec.msg.x - x) ** 2 + (rec.msg.y - y) ** 2) ** 0.5
-            if rid not in self.near and d <= self.radius:
-                self.near[rid] = Latest(self._session, self._keys.state(rid), StateMsg.decode,
-                                        self._clock, capacity=8)
-            elif rid in self.near and d > self.radius + self.hysteresis:
-                sub = self.near.pop(rid)
+            if rid not in near and d <= self.radius:
+                near[rid] = Latest(self._session, self._keys.state(rid), StateMsg.decode,
+                                   self._clock, capacity=8)
+            elif rid in near and d > self.radius + self.hysteresis:
+                gone.append(near.pop(rid))
+        self.near = MappingProxyType(near)
+        for sub in gone:
+            with self._counter_lock:
                 _add_counters(self._closed, sub.counters())
-                sub.close()
+            sub.close()
 
     def counters(self) -> dict:
         """Full-rate state counters (as :meth:`Latest.counters`), closed subscriptions included."""
-        total = {**self._closed, "dropped": Counter(self._closed["dropped"])}
+        with self._counter_lock:
+            total = {**self._closed, "dropped": Counter(self._closed["dropped"])}
         for sub in self.near.values():
             _add_counters(total, sub.counters())
         return {**total, "dropped": dict(total["dropped"])}
 
     def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
         for sub in (self.beacons, *self.near.values()):
             sub.close()
-        self.near.clear()
+        self.near = MappingProxyType({})
 
 
 class SwarmLink:
@@ -294,14 +331,13 @@ class SwarmLink:
     it (:class:`NearStates`); 0 takes every robot's."""
 
     BEACON_PERIOD = 0.2        # s
-    REFOCUS_PERIOD = 0.1       # s, how often the near set is revised
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
                  clock: Callable[[], float], near_radius: float = 0.0):
         self.keys, self.robot_id = keys, robot_id
         self._pub = session.declare_publisher(keys.state(robot_id))
         self._beacon = session.declare_publisher(keys.beacon(robot_id))
-        self._beacon_due = self._refocus_due = 0.0
+        self._beacon_due = 0.0
         self._token = session.liveliness().declare_token(keys.robot(robot_id))
         self.states: Latest[StateMsg] | NearStates = (
             NearStates(session, keys, robot_id, clock, near_radius) if near_radius > 0 else
@@ -316,9 +352,8 @@ class SwarmLink:
         if now >= self._beacon_due:
             self._beacon.put(payload)
             self._beacon_due = now + self.BEACON_PERIOD
-        if isinstance(self.states, NearStates) and now >= self._refocus_due:
-            self.states.refocus(state.x, state.y)
-            self._refocus_due = now + self.REFOCUS_PERIOD
+        if isinstance(self.states, NearStates):
+            self.states.focus(state.x, state.y)
 
     def neighbours(self) -> Mapping[int, Received[StateMsg]]:
         return self.states.snapshot()
