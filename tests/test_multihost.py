@@ -24,11 +24,9 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from hil.deploy import deploy, load_manifest
-from hil.recorder import read_messages
 from hil.scenario import load_scenario
 from hil.sitl_report import analyse_recording
 
@@ -297,40 +295,16 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
     finally:
         hosts.close()
     assert not [p for _, p in hosts.procs if p.poll() is None]
-    _, metrics, _ = analyse_recording(tmp_path / "run.mcap", sc)
+    _, metrics, extra = analyse_recording(tmp_path / "run.mcap", sc)
+    assert extra["epoch"] == pytest.approx(epoch, abs=0.01)
     result.update(
         metrics=metrics.summary(sc.name, sc.duration), a=sc.control.a,
-        missed_in_mission=missed_ticks(tmp_path / "run.mcap", epoch, sc.control.period,
-                                       sc.duration),
+        missed_in_mission=extra["missed_in_mission"],
         agents={r: json.loads((logs / f"agent_{r}.json").read_text()) for r in ids},
         world=json.loads((logs / "world.json").read_text()),
         watchdog_trips={r: (logs / f"drivers_{r}.log").read_text().count("watchdog expired")
                         for r in ids})
     return result
-
-
-def missed_ticks(mcap: Path, epoch: float, period: float, duration: float) -> dict[int, int]:
-    """Control periods each agent skipped between t = 0 and ``duration``, from its recorded
-    states. An agent ticks on a fixed grid (start + k period) and stamps each state when its
-    tick wakes (lateness well below a period), so a state's grid index is its stamp's phase
-    on that grid; two consecutive states (seq n, n + 1) k indices apart are k - 1 skipped
-    deadlines (a gap in seq is a lost message, not a miss). Over a whole recording this
-    equals the agents' own overrun counters, which also hold start-up and shut-down."""
-    ticks: dict[int, list[tuple[int, float]]] = {}
-    for _, kind, _, msg in read_messages(mcap):
-        if kind == "state":
-            ticks.setdefault(msg["robot_id"], []).append((msg["seq"], msg["stamp"] - epoch))
-    missed = {}
-    for rid, rows in sorted(ticks.items()):
-        rows.sort()
-        seq = np.array([r[0] for r in rows])
-        t = np.array([r[1] for r in rows])
-        phase = np.angle(np.mean(np.exp(2j * np.pi * t / period))) * period / (2 * np.pi)
-        k = np.floor((t - phase) / period + 0.25).astype(int)
-        skipped = np.diff(k) - 1
-        inside = (np.diff(seq) == 1) & (t[:-1] >= 0.0) & (t[1:] <= duration)
-        missed[rid] = int(skipped[inside].sum())
-    return missed
 
 
 def _write_atomic(path: Path, text: str) -> None:

@@ -93,6 +93,7 @@ def test_sitl_paper_scenario(launch):
     realtime = all(json.loads(f.read_text())["realtime"]
                    for f in (run.out / "logs").glob("agent_*.json"))
     assert s["deadline_misses"] <= (0 if realtime else 3), (s["deadline_misses"], realtime)
+    assert 0 <= s["deadline_misses_in_mission"] <= s["deadline_misses"]
     # after convergence, each robot within 0.5 m of the batch simulation
     data = read_run(run.out)
     batch = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
@@ -105,6 +106,20 @@ def test_sitl_paper_scenario(launch):
     assert not [p for p in run.pids() if alive(p)]
     for name in ("run.mcap", "trajectories.csv", "figures/xy.png", "config/robot_1.toml"):
         assert (run.out / name).exists(), name
+
+
+def test_missed_periods_counted_from_the_recorded_stamps():
+    """A state two grid steps after the previous one is one skipped period; a seq gap is a
+    lost message, not a miss; only periods inside [start, end] count."""
+    from hil.sitl_report import missed_periods
+    T, start = 0.02, 1000.0
+    k = [0, 1, 2, 4, 5, 6, 8, 11, 12, 13]           # grid ticks that sent a state
+    seq = [1, 2, 3, 4, 5, 6, 8, 9, 10, 11]          # tick 7 sent seq 7, lost in transit
+    stamps = [start - 0.07 + T * i + 0.0004 * (i % 3) for i in k]   # wake-up lateness
+    rows = list(zip(seq, stamps))
+    assert missed_periods(rows, T, start - 1.0, start + 1.0) == 3    # ticks 3, 9, 10
+    assert missed_periods(rows, T, start, start + 1.0) == 2          # tick 3 before start
+    assert missed_periods(rows[:1], T, start, start + 1.0) == 0
 
 
 def test_sigkill_of_an_agent_and_malformed_payloads(launch):
