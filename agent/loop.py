@@ -52,10 +52,18 @@ class LoopStats:
     window: int = 20000
     ticks: int = 0
     overruns: int = 0            # deadlines missed (ticks skipped)
-    overrun_at: list = field(default_factory=list)   # s after loop start: ticks that overran
-                                                     # (the first 20)
+    overrun_events: list = field(default_factory=list)  # (UNIX time [s], periods skipped)
+                                                        # of the first MAX_EVENTS overruns
     jitter: deque = field(default_factory=deque)     # s, start - deadline
     compute: deque = field(default_factory=deque)    # s, tick duration
+
+    MAX_EVENTS = 1000
+
+    def overrun(self, wall: float, skipped: int) -> None:
+        """A tick ended ``skipped`` deadlines late, noticed at UNIX time ``wall`` [s]."""
+        self.overruns += skipped
+        if len(self.overrun_events) < self.MAX_EVENTS:
+            self.overrun_events.append((wall, skipped))
 
     def record(self, jitter: float, compute: float) -> None:
         self.ticks += 1
@@ -73,7 +81,7 @@ class LoopStats:
             return {"p50_ms": float(np.percentile(a, 50)), "p99_ms": float(np.percentile(a, 99)),
                     "max_ms": float(a.max())}
         return {"period_s": self.period, "ticks": self.ticks, "overruns": self.overruns,
-                "overrun_at_s": [round(t, 3) for t in self.overrun_at],
+                "overrun_events": [[round(t, 3), n] for t, n in self.overrun_events],
                 "jitter": pct(self.jitter), "compute": pct(self.compute)}
 
 
@@ -106,9 +114,7 @@ class FixedRateLoop:
             # next deadline still in the future; deadlines passed meanwhile are skipped
             next_k = max(k + 1, math.floor((done - start) / self.period) + 1)
             if next_k > k + 1:
-                self.stats.overruns += next_k - (k + 1)
-                if len(self.stats.overrun_at) < 20:
-                    self.stats.overrun_at.append(deadline - start)
+                self.stats.overrun(self.clock.wall(), next_k - (k + 1))
             k = next_k
 
 

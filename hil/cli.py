@@ -72,7 +72,7 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     from hil.figures import draw_figures
     from hil.scenario import load_scenario
     from hil.sitl import SitlError, SitlOptions, run_sitl
-    from hil.sitl_report import analyse_recording
+    from hil.sitl_report import analyse_recording, missed_in
     sc = load_scenario(args.scenario)
     if args.duration:
         import dataclasses
@@ -103,13 +103,15 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     data, result, extra = analyse_recording(out / "run.mcap", sc)
     metrics = result.summary(sc.name, sc.duration)
     loops = {rid: st["loop"] for rid, st in run.agent_stats.items()}
+    mission_misses = {rid: missed_in(lp, extra["epoch"], extra["epoch"] + sc.duration)
+                      for rid, lp in loops.items()}
     metrics["sitl"] = {
         "wall_seconds": round(time.perf_counter() - started, 2),
         "agents_reporting": len(run.agent_stats),
         "lost_processes": run.lost,
         "deadline_misses": sum(lp["overruns"] for lp in loops.values()),
-        "deadline_misses_in_mission": sum(extra["missed_in_mission"].values()),
-        "missed_in_mission_per_agent": extra["missed_in_mission"],
+        "deadline_misses_in_mission": sum(mission_misses.values()),
+        "missed_in_mission_per_agent": mission_misses,
         "period_jitter_ms": _percentiles([lp["jitter"]["p99_ms"] for lp in loops.values()]),
         "jitter_p50_ms_per_agent": {r: lp["jitter"]["p50_ms"] for r, lp in loops.items()},
         "jitter_p99_ms_per_agent": {r: lp["jitter"]["p99_ms"] for r, lp in loops.items()},

@@ -36,29 +36,15 @@ def _at(times: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
     return values[idx]
 
 
-def missed_periods(seq_stamps: list[tuple[int, float]], period: float, start: float,
-                   end: float) -> int:
-    """Control periods an agent skipped between ``start`` and ``end`` [s, its stamps' clock],
-    from its states' (seq, stamp). An agent ticks on a fixed grid (start + k period) and
-    stamps each state when its tick wakes (well within a period), so a state's grid index is
-    its stamp's phase on that grid; two consecutive states (seq n, n + 1) k indices apart are
-    k - 1 skipped deadlines (a gap in seq is a lost message, not a miss). Over a whole
-    recording this equals the agent's own overrun counter, which also holds start-up."""
-    if len(seq_stamps) < 2:
-        return 0
-    rows = sorted(seq_stamps)
-    seq = np.array([r[0] for r in rows])
-    t = np.array([r[1] for r in rows]) - start
-    phase = np.angle(np.mean(np.exp(2j * np.pi * t / period))) * period / (2 * np.pi)
-    k = np.floor((t - phase) / period + 0.25).astype(int)
-    inside = (np.diff(seq) == 1) & (t[:-1] >= 0.0) & (t[1:] <= end - start)
-    return int((np.diff(k) - 1)[inside].sum())
+def missed_in(loop_stats: dict, start: float, end: float) -> int:
+    """Periods a loop skipped (its ``overrun_events``, UNIX times) between ``start`` and
+    ``end`` [s]: the deadline misses of a mission, apart from start-up and shut-down."""
+    return sum(n for t, n in loop_stats["overrun_events"] if start <= t <= end)
 
 
 def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, dict]:
-    """(run data on the control period, metrics, extras) of a recording. Extras: the
-    ``epoch`` and, per robot, the control periods ``missed_in_mission`` (t = 0 .. duration)."""
-    truth, states, ticks = defaultdict(list), defaultdict(list), defaultdict(list)
+    """(run data on the control period, metrics, extras such as the epoch) of a recording."""
+    truth, states = defaultdict(list), defaultdict(list)
     epoch = None
     for _topic, kind, _log_t, msg in read_messages(path):
         if kind == "mission" and epoch is None:
@@ -69,7 +55,6 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
         elif kind == "state":
             states[msg["robot_id"]].append((msg["stamp"], [msg["v"], msg["u"], msg["mode"],
                                                            msg["x_d"], msg["y_d"]]))
-            ticks[msg["robot_id"]].append((msg["seq"], msg["stamp"]))
     if epoch is None:
         raise RecordingError(f"{path}: no mission message; was the mission started?")
     missing = [int(i) for i in sc.ids if not truth.get(int(i)) or not states.get(int(i))]
@@ -114,6 +99,4 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
                    dist_t=np.asarray(metrics.geometry_t),
                    d_min=finite_or_nan(metrics.geometry_dmin),
                    clearance_min=finite_or_nan(metrics.geometry_clear))
-    missed = {int(rid): missed_periods(ticks[int(rid)], T, epoch, epoch + sc.duration)
-              for rid in sc.ids}
-    return data, metrics, {"epoch": epoch, "missed_in_mission": missed}
+    return data, metrics, {"epoch": epoch}

@@ -108,18 +108,11 @@ def test_sitl_paper_scenario(launch):
         assert (run.out / name).exists(), name
 
 
-def test_missed_periods_counted_from_the_recorded_stamps():
-    """A state two grid steps after the previous one is one skipped period; a seq gap is a
-    lost message, not a miss; only periods inside [start, end] count."""
-    from hil.sitl_report import missed_periods
-    T, start = 0.02, 1000.0
-    k = [0, 1, 2, 4, 5, 6, 8, 11, 12, 13]           # grid ticks that sent a state
-    seq = [1, 2, 3, 4, 5, 6, 8, 9, 10, 11]          # tick 7 sent seq 7, lost in transit
-    stamps = [start - 0.07 + T * i + 0.0004 * (i % 3) for i in k]   # wake-up lateness
-    rows = list(zip(seq, stamps))
-    assert missed_periods(rows, T, start - 1.0, start + 1.0) == 3    # ticks 3, 9, 10
-    assert missed_periods(rows, T, start, start + 1.0) == 2          # tick 3 before start
-    assert missed_periods(rows[:1], T, start, start + 1.0) == 0
+def test_mission_misses_are_the_overruns_between_epoch_and_end():
+    from hil.sitl_report import missed_in
+    loop = {"overruns": 6, "overrun_events": [[99.5, 1], [100.0, 2], [107.2, 1], [110.1, 2]]}
+    assert missed_in(loop, 100.0, 110.0) == 3          # start-up and shut-down left out
+    assert missed_in({"overrun_events": []}, 100.0, 110.0) == 0
 
 
 def test_sigkill_of_an_agent_and_malformed_payloads(launch):
