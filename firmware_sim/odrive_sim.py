@@ -17,6 +17,10 @@
 and Get_Encoder_Estimates (10 ms) out, remote requests answered; malformed frames ignored
 and counted. Fault injection: silence a node, drop or delay a fraction of the frames it
 sends (seeded RNG), raise an error bit.
+
+The two frames of the steady flow (Get_Encoder_Estimates out, Set_Input_Vel in) are packed
+and unpacked directly with their DBC-checked structs from :mod:`transport.odrive_frames`;
+every other frame goes through its :func:`encode` and :func:`decode`.
 """
 from __future__ import annotations
 
@@ -26,13 +30,22 @@ import math
 import random
 from collections import Counter
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import can
 
-from transport.odrive_frames import (AxisError, AxisState, Cmd, ControlMode, Frame, InputMode,
-                                     encode, receive)
+from transport.odrive_frames import (ENCODER_ESTIMATES, INPUT_VEL, AxisError, AxisState, Cmd,
+                                     ControlMode, Frame, FrameError, InputMode, arbitration_id,
+                                     decode, encode)
 
 log = logging.getLogger(__name__)
+
+
+@lru_cache(maxsize=256)
+def _heartbeat_data(node: int, error: int, state: int) -> bytes:
+    """A heartbeat's data bytes (they change only with the axis' error bits and state)."""
+    return bytes(encode(node, Cmd.HEARTBEAT, Axis_Error=error, Axis_State=state,
+                        Procedure_Result=0, Trajectory_Done_Flag=0).data)
 
 
 @dataclass
@@ -83,28 +96,30 @@ class EmulatedAxis:
 
     def step(self, dt: float) -> None:
         """Advance the axis by ``dt``: watchdog, ramp or coast, encoder."""
-        before = self.vel
-        if self.state == AxisState.CLOSED_LOOP_CONTROL:
+        before = vel = self.vel
+        closed = self.state == AxisState.CLOSED_LOOP_CONTROL
+        if closed:
             self._since_input += dt
             if self.watchdog and self._since_input > self.watchdog + 1e-9:
                 self.error |= AxisError.WATCHDOG_TIMER_EXPIRED
                 self.state = AxisState.IDLE
+                closed = False
                 self.watchdog_trips += 1
                 log.warning("watchdog expired after %.3f s without a command",
                             self._since_input)
-        if self.state == AxisState.CLOSED_LOOP_CONTROL:
+        if closed:
             target = self.setpoint if (self.control_mode == ControlMode.VELOCITY_CONTROL
                                        and self.input_mode == InputMode.VEL_RAMP) else 0.0
             step = self.ramp * dt
-            self.vel += max(-step, min(step, target - self.vel))
+            vel += max(-step, min(step, target - vel))
         else:
-            self.vel *= math.exp(-dt / self.coast_tau)
-            if abs(self.vel) < 1e-4:
-                self.vel = 0.0
-        self.pos += 0.5 * (before + self.vel) * dt
-        accel = (self.vel - before) / dt if dt > 0 else 0.0
-        self.current = 0.05 * abs(accel) + 0.02 * abs(self.vel) + (
-            0.1 if self.state == AxisState.CLOSED_LOOP_CONTROL else 0.0)
+            vel *= math.exp(-dt / self.coast_tau)
+            if abs(vel) < 1e-4:
+                vel = 0.0
+        self.vel = vel
+        self.pos += 0.5 * (before + vel) * dt
+        accel = (vel - before) / dt if dt > 0 else 0.0
+        self.current = 0.05 * abs(accel) + 0.02 * abs(vel) + (0.1 if closed else 0.0)
 
 
 @dataclass
@@ -130,7 +145,7 @@ class DriverPair:
     rng: random.Random = field(default_factory=lambda: random.Random(0))
     ignored: Counter = field(default_factory=Counter)
     sent: int = 0
-    _next: dict = field(default_factory=dict)
+    _due: dict = field(default_factory=dict)     # node -> [heartbeat, encoder] next due [s]
     _queue: list = field(default_factory=list)
     _now: float = 0.0
 
@@ -149,26 +164,51 @@ class DriverPair:
     def service(self, now: float) -> None:
         """Handle every frame waiting on the bus, then send what is due at ``now`` [s]."""
         self._now = now
-        for frame in receive(self.bus, self.ignored):
-            self._handle(frame)
+        while (msg := self.bus.recv(0.0)) is not None:
+            self._receive(msg)
         for node, axis in self.axes.items():
-            due = self._next.setdefault(node, {Cmd.HEARTBEAT: now,
-                                               Cmd.GET_ENCODER_ESTIMATES: now})
-            if now >= due[Cmd.HEARTBEAT]:
-                due[Cmd.HEARTBEAT] = max(due[Cmd.HEARTBEAT] + self.heartbeat_period, now)
+            due = self._due.get(node)
+            if due is None:
+                due = self._due[node] = [now, now]
+            if now >= due[0]:
+                due[0] = max(due[0] + self.heartbeat_period, now)
                 self._emit(node, self._heartbeat(node, axis))
-            if now >= due[Cmd.GET_ENCODER_ESTIMATES]:
-                due[Cmd.GET_ENCODER_ESTIMATES] = max(
-                    due[Cmd.GET_ENCODER_ESTIMATES] + self.encoder_period, now)
-                self._emit(node, encode(node, Cmd.GET_ENCODER_ESTIMATES,
-                                        Pos_Estimate=axis.pos, Vel_Estimate=axis.vel))
+            if now >= due[1]:
+                due[1] = max(due[1] + self.encoder_period, now)
+                self._emit(node, self._encoder_estimates(node, axis))
         while self._queue and self._queue[0][0] <= now:
             _, _, msg = heapq.heappop(self._queue)
             self._send(msg)
 
-    def _heartbeat(self, node: int, axis: EmulatedAxis) -> can.Message:
-        return encode(node, Cmd.HEARTBEAT, Axis_Error=int(axis.error),
-                      Axis_State=int(axis.state), Procedure_Result=0, Trajectory_Done_Flag=0)
+    def _receive(self, msg: can.Message) -> None:
+        """Handle one received frame: a well-formed Set_Input_Vel for one of our axes on the
+        fast path, any other through :func:`decode` (frames to ignore counted)."""
+        node, cmd = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
+        axis = self.axes.get(node) if cmd == Cmd.SET_INPUT_VEL else None
+        if (axis is not None and len(msg.data) == INPUT_VEL.size
+                and not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame)):
+            vel, torque = INPUT_VEL.unpack(msg.data)
+            if math.isfinite(vel) and math.isfinite(torque):
+                axis.input_vel(vel)
+                return
+        try:
+            frame = decode(msg)
+        except FrameError as exc:
+            self.ignored[exc.reason] += 1
+            return
+        self._handle(frame)
+
+    @staticmethod
+    def _heartbeat(node: int, axis: EmulatedAxis) -> can.Message:
+        return can.Message(arbitration_id=arbitration_id(node, Cmd.HEARTBEAT),
+                           data=_heartbeat_data(node, int(axis.error), int(axis.state)),
+                           is_extended_id=False)
+
+    @staticmethod
+    def _encoder_estimates(node: int, axis: EmulatedAxis) -> can.Message:
+        return can.Message(arbitration_id=arbitration_id(node, Cmd.GET_ENCODER_ESTIMATES),
+                           data=ENCODER_ESTIMATES.pack(axis.pos, axis.vel),
+                           is_extended_id=False)
 
     def _emit(self, node: int, msg: can.Message) -> None:
         f = self.faults[node]
@@ -210,7 +250,7 @@ class DriverPair:
 
     def _answer(self, node: int, cmd: Cmd, axis: EmulatedAxis) -> None:
         if cmd == Cmd.GET_ENCODER_ESTIMATES:
-            reply = encode(node, cmd, Pos_Estimate=axis.pos, Vel_Estimate=axis.vel)
+            reply = self._encoder_estimates(node, axis)
         elif cmd == Cmd.GET_BUS_VOLTAGE_CURRENT:
             reply = encode(node, cmd, Bus_Voltage=axis.bus_voltage, Bus_Current=axis.current)
         elif cmd == Cmd.GET_ERROR:

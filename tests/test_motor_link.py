@@ -192,3 +192,16 @@ def test_arming_does_not_clear_a_latched_estop(rig):
     rig.run(0.15, command=(1.0, 1.0))
     fb = rig.host.feedback()
     assert "left: ESTOP_REQUESTED" in fb.errors and not fb.closed_loop
+
+
+def test_cyclic_estimates_and_answers_carry_the_axis_state(rig):
+    rig.host.arm()
+    rig.run(0.1, command=(2.5, -1.25))
+    axis = rig.drivers.axes[1]
+    rig.host_bus.send(request(1, Cmd.GET_ENCODER_ESTIMATES))
+    rig.drivers.service(rig.now)
+    got = [m for m in iter(lambda: rig.host_bus.recv(0.0), None)
+           if m.arbitration_id == (1 << 5 | Cmd.GET_ENCODER_ESTIMATES)]
+    assert got and struct.unpack("<ff", got[-1].data) == pytest.approx((axis.pos, axis.vel))
+    assert got[-1].data == encode(1, Cmd.GET_ENCODER_ESTIMATES, Pos_Estimate=axis.pos,
+                                  Vel_Estimate=axis.vel).data

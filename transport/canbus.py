@@ -17,6 +17,7 @@ import time
 from collections import deque
 
 import can
+from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 DEFAULT_GROUP = "ff11::b5:1"     # interface-local scope: never routed off the host
 DEFAULT_PORT = 43100
@@ -38,15 +39,18 @@ def has_socketcan(channel: str | None = None) -> bool:
 
 
 class EchoFilteredBus(can.BusABC):
-    """Wraps a bus that hears its own frames and drops those echoes.
+    """A python-can ``udp_multicast`` bus that drops the echoes of its own frames.
 
-    Echoes arrive in the order the frames were sent; each received frame equal to the
-    oldest unechoed sent frame (id, RTR, DLC, data) is taken as its echo. Entries older than
-    ``horizon`` seconds are forgotten (an echo that never came).
+    Such a bus hears every datagram it sends. Echoes arrive in the order the frames were
+    sent; a received datagram equal to the oldest unechoed sent one is taken as its echo and
+    dropped before it is unpacked (the datagrams are compared, so an echo costs no decoding).
+    Entries older than ``horizon`` seconds are forgotten (an echo that never came). Datagrams
+    that are not classic CAN frames are counted in ``malformed`` and skipped.
     """
 
     def __init__(self, inner: can.BusABC, horizon: float = 0.5):
         self.inner = inner
+        self._socket = inner._multicast     # python-can's datagram socket of this bus
         self.horizon = horizon
         self._sent: deque = deque()
         self.echoes_dropped = 0
@@ -54,34 +58,32 @@ class EchoFilteredBus(can.BusABC):
         super().__init__(channel=inner.channel_info)
         self.channel_info = inner.channel_info
 
-    @staticmethod
-    def _key(msg: can.Message) -> tuple:
-        return (msg.arbitration_id, msg.is_remote_frame, msg.dlc,
-                bytes(msg.data) if not msg.is_remote_frame else b"")
-
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        self.inner.send(msg, timeout)
-        self._sent.append((time.monotonic(), self._key(msg)))
+        data = pack_message(msg)
+        self._socket.send(data, timeout)
+        self._sent.append((time.monotonic(), data))
 
     def _recv_internal(self, timeout: float | None):
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
-            try:   # the inner bus has no filters: its own receive, without recv()'s loop
-                msg, _ = self.inner._recv_internal(remaining)
-            except can.CanOperationError as exc:
-                if isinstance(exc.__cause__, OSError):
-                    raise
-                self.malformed += 1            # a datagram that is not a CAN frame
-                continue
-            if msg is None:
+            got = self._socket.recv(remaining)      # raises CanOperationError if the socket fails
+            if not got:
                 return None, False
+            data, _, timestamp = got
             now = time.monotonic()
             while self._sent and now - self._sent[0][0] > self.horizon:
                 self._sent.popleft()
-            if self._sent and self._sent[0][1] == self._key(msg):
+            if self._sent and self._sent[0][1] == data:
                 self._sent.popleft()
                 self.echoes_dropped += 1
+                continue
+            try:
+                msg = unpack_message(data, replace={"timestamp": timestamp}, check=True)
+            except Exception:                  # msgpack or python-can: not a frame of ours
+                msg = None
+            if msg is None or msg.is_fd:
+                self.malformed += 1
                 continue
             return msg, False
 

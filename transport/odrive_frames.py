@@ -2,7 +2,8 @@
 
 The DBC (``transport/odrive.dbc``) is the one source of truth for layouts, units, value
 tables and cycle times; this module builds python-can messages from it and decodes them, at
-both ends (the agent's host side and the emulated firmware). No byte is packed by hand.
+both ends (the agent's host side and the emulated firmware). No byte is packed by hand: the
+two frames of the steady flow use a struct derived from, and checked against, the DBC.
 
 Node ids: arbitration id = node_id << 5 | cmd_id. The DBC lists every message for nodes 0
 and 1 (so ``cantools decode`` reads a capture of a default robot); this module uses the
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import enum
 import math
+import struct
 from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
@@ -46,6 +48,30 @@ def database() -> cantools.database.can.Database:
 
 def _layout(cmd: Cmd) -> cantools.database.can.Message:
     return database().get_message_by_frame_id(int(cmd))
+
+
+def float32_layout(cmd: Cmd, *names: str) -> struct.Struct:
+    """A struct packing ``cmd``'s signals ``names`` (in this order) exactly as the DBC lays
+    them out; ValueError unless they are all its signals, each an unscaled little-endian
+    float32, one after the other from bit 0."""
+    layout = _layout(cmd)
+    for i, name in enumerate(names):
+        s = layout.get_signal_by_name(name)
+        if not (s.is_float and s.length == 32 and s.byte_order == "little_endian"
+                and s.start == 32 * i and s.scale == 1 and s.offset == 0):
+            raise ValueError(f"{layout.name}.{name} is not float32 number {i} of the frame")
+    if len(layout.signals) != len(names) or layout.length != 4 * len(names):
+        raise ValueError(f"{layout.name} has other signals or bytes than {names}")
+    return struct.Struct("<" + "f" * len(names))
+
+
+# The steady flow (about 100 frames per second per axis each way) packed by a struct checked
+# against the DBC at import: the same bytes as cantools, for a fraction of its cost.
+FLOAT_FRAMES = {cmd: (float32_layout(cmd, *names), names) for cmd, names in (
+    (Cmd.GET_ENCODER_ESTIMATES, ("Pos_Estimate", "Vel_Estimate")),
+    (Cmd.SET_INPUT_VEL, ("Input_Vel", "Input_Torque_FF")))}
+ENCODER_ESTIMATES = FLOAT_FRAMES[Cmd.GET_ENCODER_ESTIMATES][0]
+INPUT_VEL = FLOAT_FRAMES[Cmd.SET_INPUT_VEL][0]
 
 
 def _choices(message: str, signal: str) -> dict[int, str]:
@@ -103,8 +129,12 @@ class Frame:
 
 def encode(node: int, cmd: Cmd, **signals: float) -> can.Message:
     """A data frame of ``cmd`` for ``node`` with the given signal values."""
-    layout = _layout(cmd)
-    data = layout.encode(signals, strict=True) if layout.signals else b""
+    fast = FLOAT_FRAMES.get(cmd)
+    if fast is not None and signals.keys() == set(fast[1]):
+        data = fast[0].pack(*(signals[name] for name in fast[1]))
+    else:
+        layout = _layout(cmd)
+        data = layout.encode(signals, strict=True) if layout.signals else b""
     return can.Message(arbitration_id=arbitration_id(node, cmd), data=data,
                        is_extended_id=False)
 
@@ -130,8 +160,12 @@ def decode(msg: can.Message) -> Frame:
     if len(msg.data) != layout.length:
         raise FrameError("dlc", f"{cmd.name} of node {node}: {len(msg.data)} bytes, "
                                 f"expected {layout.length}")
-    signals = (layout.decode(bytes(msg.data), decode_choices=False, scaling=False)
-               if layout.signals else {})
+    fast = FLOAT_FRAMES.get(cmd)
+    if fast is not None:
+        signals = dict(zip(fast[1], fast[0].unpack(msg.data)))
+    else:
+        signals = (layout.decode(bytes(msg.data), decode_choices=False, scaling=False)
+                   if layout.signals else {})
     if any(isinstance(v, float) and not math.isfinite(v) for v in signals.values()):
         raise FrameError("nonfinite", f"{cmd.name} of node {node}: {signals}")
     return Frame(node, cmd, signals)
