@@ -1,8 +1,9 @@
 """Record a swarm's Zenoh traffic into an MCAP file (JSON messages, JSON schemas).
 
-Every valid payload under ``boundswarm/<swarm>/**`` becomes one MCAP message on a topic
-named after its key (``/boundswarm/<swarm>/robot/3/state``), JSON-encoded with a JSON schema
-so Foxglove Studio and the mcap tools read it directly; log time is the arrival time,
+Every valid state, truth, obstacles and mission payload of a swarm becomes one MCAP message
+on a topic named after its key (``/boundswarm/<swarm>/robot/3/state``), JSON-encoded with a
+JSON schema so Foxglove Studio and the mcap tools read it directly; log time is the arrival
+time (the sample's Zenoh timestamp, set by the router, else when the recorder took it),
 publish time the payload's own stamp. Malformed payloads are counted, not recorded.
 """
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import operator
 import threading
 import time
 from collections import Counter
@@ -26,42 +28,70 @@ from transport.zenoh_link import Keys
 
 log = logging.getLogger(__name__)
 
-DECODERS: dict[str, Callable] = {"state": StateMsg.decode, "truth": TruthMsg.decode,
-                                 "obstacles": ObstaclesMsg.decode, "mission": MissionMsg.decode}
+MESSAGES = {"state": StateMsg, "truth": TruthMsg, "obstacles": ObstaclesMsg,
+            "mission": MissionMsg}
 
 
 def _kind(key: str) -> str:
     return key.rsplit("/", 1)[-1]
 
 
-def _jsonable(msg) -> dict:
-    out = {}
-    for f in dataclasses.fields(msg):
-        value = getattr(msg, f.name)
-        if isinstance(value, np.ndarray):
-            value = value.tolist()
-        elif isinstance(value, tuple):
-            value = list(value)
-        elif isinstance(value, (np.integer, int)) and not isinstance(value, bool):
-            value = int(value)
-        out[f.name] = value
-    return out
+def _plain(value):
+    """JSON for what the decoders put in messages besides numbers and tuples: arrays."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON serializable")
+
+
+_ENCODER = json.JSONEncoder(default=_plain)
+
+
+def _any_json(cls) -> Callable[[bytes], tuple[bytes, float]]:
+    """Payload -> (JSON object of the decoded message's fields, stamp); PayloadError if bad."""
+    def encode(payload: bytes) -> tuple[bytes, float]:
+        msg = cls.decode(payload)
+        return _ENCODER.encode(vars(msg)).encode(), msg.stamp
+    return encode
+
+
+def _numbers_json(cls) -> Callable[[bytes], tuple[bytes, float]]:
+    """_any_json, faster, for a message of numbers only: a template writes its fields, %r a
+    float as json does (decode refuses non-finite ones), %d an int or an IntFlag as a plain
+    int."""
+    names = [f.name for f in dataclasses.fields(cls)]
+    template = ("{" + ", ".join(f'"{f.name}": %{"r" if f.type in ("float", float) else "d"}'
+                                for f in dataclasses.fields(cls)) + "}").encode()
+    values = operator.attrgetter(*names)
+
+    def encode(payload: bytes) -> tuple[bytes, float]:
+        msg = cls.decode(payload)
+        return template % values(msg), msg.stamp
+    return encode
+
+
+ENCODERS: dict[str, Callable[[bytes], tuple[bytes, float]]] = {
+    "state": _numbers_json(StateMsg), "truth": _numbers_json(TruthMsg),
+    "obstacles": _any_json(ObstaclesMsg), "mission": _any_json(MissionMsg)}
 
 
 def _schema(kind: str) -> bytes:
-    cls = {"state": StateMsg, "truth": TruthMsg, "obstacles": ObstaclesMsg,
-           "mission": MissionMsg}[kind]
-    props = {f.name: {} for f in dataclasses.fields(cls)}
+    props = {f.name: {} for f in dataclasses.fields(MESSAGES[kind])}
     return json.dumps({"title": f"boundswarm.{kind}", "type": "object",
                        "properties": props}).encode()
 
 
 class Recorder:
-    """Writes everything valid under ``keys.prefix`` into ``path`` until :meth:`close`."""
+    """Writes every valid state, truth, obstacles and mission payload of a swarm into ``path``
+    until :meth:`close`.
+
+    Samples wait in Zenoh FIFO channels (``capacity`` each: when one is full, Zenoh blocks
+    rather than drops) and a recorder thread writes them every ``interval`` seconds.
+    """
 
     def __init__(self, session: zenoh.Session, keys: Keys, path: Path,
-                 clock: Callable[[], float] = time.time):
-        self.path, self._clock = path, clock
+                 clock: Callable[[], float] = time.time, interval: float = 0.03,
+                 capacity: int = 1 << 14):
+        self.path, self._clock, self._interval = path, clock, interval
         self._file = open(path, "wb")
         self._writer = Writer(self._file)
         self._writer.start(profile="", library="boundswarm")
@@ -71,46 +101,67 @@ class Recorder:
         self.recorded = 0
         self.dropped: Counter = Counter()
         self._closed = False
-        self._sub = session.declare_subscriber(f"{keys.prefix}/**", self._on_sample)
+        self._stop = threading.Event()
+        subscribe = {"state": keys.state("*"), "truth": keys.truth("*"),
+                     "obstacles": keys.obstacles("*"), "mission": keys.mission}
+        self._subs = [session.declare_subscriber(key, zenoh.handlers.FifoChannel(capacity))
+                      for key in subscribe.values()]
+        self._handlers = [(kind, sub.handler) for kind, sub in zip(subscribe, self._subs)]
+        self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
+        self._thread.start()
 
-    def _channel(self, topic: str, kind: str) -> int:
+    def _channel(self, key: str, kind: str) -> int:
         if kind not in self._schemas:
             self._schemas[kind] = self._writer.register_schema(
                 name=f"boundswarm.{kind}", encoding="jsonschema", data=_schema(kind))
-        if topic not in self._channels:
-            self._channels[topic] = self._writer.register_channel(
-                topic=topic, message_encoding="json", schema_id=self._schemas[kind])
-        return self._channels[topic]
+        self._channels[key] = self._writer.register_channel(
+            topic="/" + key, message_encoding="json", schema_id=self._schemas[kind])
+        return self._channels[key]
 
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        now = self._clock()
-        key = str(sample.key_expr)
-        kind = _kind(key)
-        decode = DECODERS.get(kind)
-        if decode is None:
-            return
-        try:
-            msg = decode(sample.payload.to_bytes())
-        except PayloadError as exc:
-            with self._lock:
-                self.dropped[exc.reason] += 1
-            return
-        data = json.dumps(_jsonable(msg)).encode()
+    def _run(self) -> None:
+        while not self._stop.wait(self._interval):
+            try:
+                self._drain()
+            except Exception:
+                log.exception("recorder: writing %s failed", self.path)
+
+    def _drain(self) -> None:
+        """Write every sample waiting in the channels."""
+        now = int(self._clock() * 1e9)
+        channels, add = self._channels, self._writer.add_message
+        for kind, handler in self._handlers:
+            encode = ENCODERS[kind]
+            try:
+                while (sample := handler.try_recv()) is not None:
+                    try:
+                        data, stamp = encode(sample.payload.to_bytes())
+                    except PayloadError as exc:
+                        self.dropped[exc.reason] += 1
+                        continue
+                    key = str(sample.key_expr)
+                    channel = channels.get(key)
+                    if channel is None:
+                        channel = self._channel(key, kind)
+                    ts = sample.timestamp
+                    add(channel, log_time=ts.get_time_as_ntp64().as_nanos() if ts else now,
+                        data=data, publish_time=int(stamp * 1e9))
+                    self.recorded += 1
+            except zenoh.ZError:           # empty and closed: the subscriber is undeclared
+                pass
+
+    def close(self) -> None:
+        """Stop receiving, write what was received and finish the file."""
         with self._lock:
             if self._closed:
                 return
-            channel = self._channel("/" + key, kind)
-            self._writer.add_message(channel, log_time=int(now * 1e9), data=data,
-                                     publish_time=int(msg.stamp * 1e9))
-            self.recorded += 1
-
-    def close(self) -> None:
-        self._sub.undeclare()
-        with self._lock:
-            if not self._closed:
-                self._closed = True
-                self._writer.finish()
-                self._file.close()
+            self._closed = True
+        for sub in self._subs:     # while the thread still drains: Zenoh may wait on a full one
+            sub.undeclare()
+        self._stop.set()
+        self._thread.join()
+        self._drain()
+        self._writer.finish()
+        self._file.close()
 
 
 def read_messages(path: Path) -> Iterator[tuple[str, str, float, dict]]:
