@@ -31,7 +31,7 @@ import enum
 import math
 import struct
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Generic, NamedTuple, TypeVar
 
 import numpy as np
 
@@ -61,6 +61,8 @@ class StateFlags(enum.IntFlag):
     FAILSAFE = 4      # a timeout or fault put the agent in its safe state
 
 
+_FLAGS = tuple(StateFlags(bits) for bits in range(8))     # decoded flags, built once
+
 M = TypeVar("M")
 
 
@@ -80,8 +82,9 @@ class PayloadError(ValueError):
         self.reason = reason
 
 
-@dataclass(frozen=True)
-class Header:
+class Header(NamedTuple):
+    """The common header of every payload (a tuple: built for every message received)."""
+
     kind: PayloadKind
     robot_id: int
     seq: int
@@ -153,8 +156,7 @@ class StateMsg:
     def decode(cls, data: bytes) -> "StateMsg":
         h, (x, y, th, v, u, xd, yd, mode, flags) = _fixed(data, PayloadKind.STATE, STATE_BODY,
                                                           "state")
-        return cls(h.robot_id, h.seq, h.stamp, x, y, th, v, u, xd, yd, mode,
-                   StateFlags(flags & 0x7))
+        return cls(h.robot_id, h.seq, h.stamp, x, y, th, v, u, xd, yd, mode, _FLAGS[flags & 0x7])
 
 
 @dataclass(frozen=True)
