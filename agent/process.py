@@ -28,6 +28,9 @@ from transport.zenoh_link import (Keys, SwarmLink, config_from_file, open_sessio
 
 log = logging.getLogger(__name__)
 
+MAVLINK_PERIOD = 0.1     # s between MAVLink polls: telemetry is at most 10 Hz, and a ground
+                         # station's command waits at most this long
+
 
 class AgentVehicle:
     """The agent as the vehicle a ground station commands (transport.mavlink_link's
@@ -88,10 +91,14 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         log.info("agent %d running at %g Hz", s.robot_id, 1.0 / s.control.period)
         notifier = Notifier()
         overruns = [0]
+        next_mavlink = [0.0]
 
         def tick(k: int, deadline: float) -> None:
             agent.tick(k, deadline)
-            link.poll(clock.monotonic())          # bounded, never blocks
+            now = clock.monotonic()
+            if now >= next_mavlink[0]:            # bounded, never blocks
+                link.poll(now)
+                next_mavlink[0] = max(next_mavlink[0] + MAVLINK_PERIOD, now)
             fb = agent.last_feedback
             if fb is not None and fb.closed_loop and agent.failsafe is None:
                 notifier.ready(f"robot {s.robot_id} armed")

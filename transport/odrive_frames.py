@@ -50,6 +50,9 @@ def _layout(cmd: Cmd) -> cantools.database.can.Message:
     return database().get_message_by_frame_id(int(cmd))
 
 
+_CMDS = {int(c): c for c in Cmd}
+
+
 def float32_layout(cmd: Cmd, *names: str) -> struct.Struct:
     """A struct packing ``cmd``'s signals ``names`` (in this order) exactly as the DBC lays
     them out; ValueError unless they are all its signals, each an unscaled little-endian
@@ -150,10 +153,9 @@ def decode(msg: can.Message) -> Frame:
     if msg.is_extended_id or msg.is_error_frame or msg.arbitration_id > 0x7FF:
         raise FrameError("unknown_id", f"0x{msg.arbitration_id:x} is not an 11-bit ODrive id")
     node, cmd_id = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
-    try:
-        cmd = Cmd(cmd_id)
-    except ValueError:
-        raise FrameError("unknown_id", f"command 0x{cmd_id:02x} of node {node}") from None
+    cmd = _CMDS.get(cmd_id)
+    if cmd is None:
+        raise FrameError("unknown_id", f"command 0x{cmd_id:02x} of node {node}")
     layout = _layout(cmd)
     if msg.is_remote_frame:
         return Frame(node, cmd, {}, rtr=True)
@@ -162,11 +164,14 @@ def decode(msg: can.Message) -> Frame:
                                 f"expected {layout.length}")
     fast = FLOAT_FRAMES.get(cmd)
     if fast is not None:
-        signals = dict(zip(fast[1], fast[0].unpack(msg.data)))
+        values = fast[0].unpack(msg.data)
+        signals = dict(zip(fast[1], values))
+        finite = all(map(math.isfinite, values))
     else:
         signals = (layout.decode(bytes(msg.data), decode_choices=False, scaling=False)
                    if layout.signals else {})
-    if any(isinstance(v, float) and not math.isfinite(v) for v in signals.values()):
+        finite = all(math.isfinite(v) for v in signals.values() if isinstance(v, float))
+    if not finite:
         raise FrameError("nonfinite", f"{cmd.name} of node {node}: {signals}")
     return Frame(node, cmd, signals)
 
