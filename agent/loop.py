@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -54,6 +55,7 @@ class LoopStats:
     overruns: int = 0            # deadlines missed (ticks skipped)
     overrun_events: list = field(default_factory=list)  # (UNIX time [s], periods skipped)
                                                         # of the first MAX_EVENTS overruns
+    unlogged: int = 0            # periods skipped by overruns after those
     jitter: deque = field(default_factory=deque)     # s, start - deadline
     compute: deque = field(default_factory=deque)    # s, tick duration
 
@@ -64,6 +66,8 @@ class LoopStats:
         self.overruns += skipped
         if len(self.overrun_events) < self.MAX_EVENTS:
             self.overrun_events.append((wall, skipped))
+        else:
+            self.unlogged += skipped
 
     def record(self, jitter: float, compute: float) -> None:
         self.ticks += 1
@@ -82,6 +86,7 @@ class LoopStats:
                     "max_ms": float(a.max())}
         return {"period_s": self.period, "ticks": self.ticks, "overruns": self.overruns,
                 "overrun_events": [[round(t, 3), n] for t, n in self.overrun_events],
+                "overruns_unlogged": self.unlogged,
                 "jitter": pct(self.jitter), "compute": pct(self.compute)}
 
 
@@ -119,13 +124,14 @@ class FixedRateLoop:
 
 
 def use_realtime(priority: int) -> bool:
-    """Put the calling (loop) thread under SCHED_FIFO at ``priority`` (1..99); threads made
-    before, e.g. Zenoh's, keep normal scheduling. Without the right (root, CAP_SYS_NICE or
-    RLIMIT_RTPRIO) the loop runs on with normal scheduling and a warning."""
+    """Put the calling thread (the loop's, or a helper it waits on) under SCHED_FIFO at
+    ``priority`` (1..99); other threads, e.g. Zenoh's, keep normal scheduling. Without the
+    right (root, CAP_SYS_NICE or RLIMIT_RTPRIO) it runs on with normal scheduling and a
+    warning."""
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except OSError as exc:                      # PermissionError: not allowed
         log.warning("realtime_priority %d not granted (%s): normal scheduling", priority, exc)
         return False
-    log.info("loop thread: SCHED_FIFO priority %d", priority)
+    log.info("thread %s: SCHED_FIFO priority %d", threading.current_thread().name, priority)
     return True

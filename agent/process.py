@@ -28,9 +28,6 @@ from transport.zenoh_link import (Keys, SwarmLink, config_from_file, open_sessio
 
 log = logging.getLogger(__name__)
 
-MAVLINK_PERIOD = 0.1     # s between MAVLink polls: telemetry is at most 10 Hz, and a ground
-                         # station's command waits at most this long
-
 
 class AgentVehicle:
     """The agent as the vehicle a ground station commands (transport.mavlink_link's
@@ -76,8 +73,12 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         conf = (config_from_file(s.zenoh.config) if s.zenoh.config else
                 session_config(s.zenoh.mode, s.zenoh.listen, s.zenoh.connect))
         session = open_session(conf, f"agent {s.robot_id}")
+        rt = s.realtime_priority
         swarm = SwarmLink(session, Keys(s.swarm), s.robot_id, clock.wall,
-                          near_radius=s.zenoh.near_radius)
+                          near_radius=s.zenoh.near_radius,
+                          # the near-set thread takes the interpreter lock the loop needs:
+                          # scheduled as the loop, it is never starved while holding it
+                          thread_setup=(lambda: use_realtime(rt)) if rt > 0 else None)
         agent = Agent(s, motor, swarm, clock)
         link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
                          clock.wall)
@@ -91,14 +92,10 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         log.info("agent %d running at %g Hz", s.robot_id, 1.0 / s.control.period)
         notifier = Notifier()
         overruns = [0]
-        next_mavlink = [0.0]
 
         def tick(k: int, deadline: float) -> None:
             agent.tick(k, deadline)
-            now = clock.monotonic()
-            if now >= next_mavlink[0]:            # bounded, never blocks
-                link.poll(now)
-                next_mavlink[0] = max(next_mavlink[0] + MAVLINK_PERIOD, now)
+            link.poll(clock.monotonic())          # bounded, never blocks
             fb = agent.last_feedback
             if fb is not None and fb.closed_loop and agent.failsafe is None:
                 notifier.ready(f"robot {s.robot_id} armed")

@@ -48,7 +48,8 @@ class PlantRobot:
 
 
 class SitlPlant:
-    """Robots ``ids`` of a scenario; ``publish(key_kind, robot_id, payload)`` sends on Zenoh."""
+    """Robots ``ids`` of a scenario; ``publish(key_kind, robot_id, payload)`` sends on Zenoh.
+    Each robot's ``pose`` becomes a row of the plant's own pose array, updated in place."""
 
     def __init__(self, robots: list[PlantRobot], robot: RobotParams, obstacles: Obstacles,
                  sensing_range: float, publish: Callable[[str, int, bytes], None],

@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import sys
 import time
 from pathlib import Path
@@ -72,7 +71,7 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     from hil import run_folder
     from hil.figures import draw_figures
     from hil.scenario import load_scenario
-    from hil.sitl import ZENOH_RUNTIME, SitlError, SitlOptions, run_sitl
+    from hil.sitl import SitlError, SitlOptions, run_sitl
     from hil.sitl_report import analyse_recording, missed_in
     sc = load_scenario(args.scenario)
     if args.duration:
@@ -95,7 +94,6 @@ def cmd_sitl(args: argparse.Namespace, console: Console) -> int:
     if problem := near_radius_problem(opts.near_radius, sc.sensing_range):
         print(f"boundswarm sitl: --near-radius {problem}", file=sys.stderr)
         return 2
-    os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)   # this process and its children
     started = time.perf_counter()
     try:
         run = run_sitl(sc, out, opts, console)

@@ -85,7 +85,9 @@ class Recorder:
     until :meth:`close`.
 
     Samples wait in Zenoh FIFO channels (``capacity`` each: when one is full, Zenoh blocks
-    rather than drops) and a recorder thread writes them every ``interval`` seconds.
+    rather than drops, which stalls the session's routing, so the thread never stops
+    emptying them: a message it cannot write is counted in ``dropped["write_error"]``) and a
+    recorder thread writes them every ``interval`` seconds.
     """
 
     def __init__(self, session: zenoh.Session, keys: Keys, path: Path,
@@ -120,10 +122,7 @@ class Recorder:
 
     def _run(self) -> None:
         while not self._stop.wait(self._interval):
-            try:
-                self._drain()
-            except Exception:
-                log.exception("recorder: writing %s failed", self.path)
+            self._drain()
 
     def _drain(self) -> None:
         """Write every sample waiting in the channels."""
@@ -139,12 +138,18 @@ class Recorder:
                         self.dropped[exc.reason] += 1
                         continue
                     key = str(sample.key_expr)
-                    channel = channels.get(key)
-                    if channel is None:
-                        channel = self._channel(key, kind)
                     ts = sample.timestamp
-                    add(channel, log_time=ts.get_time_as_ntp64().as_nanos() if ts else now,
-                        data=data, publish_time=int(stamp * 1e9))
+                    try:
+                        channel = channels.get(key)
+                        if channel is None:
+                            channel = self._channel(key, kind)
+                        add(channel, log_time=ts.get_time_as_ntp64().as_nanos() if ts else now,
+                            data=data, publish_time=int(stamp * 1e9))
+                    except (OSError, ValueError) as exc:   # e.g. disk full: keep emptying the
+                        if not self.dropped["write_error"]:     # channels, or Zenoh would block
+                            log.error("recorder: writing %s failed: %s", self.path, exc)
+                        self.dropped["write_error"] += 1
+                        continue
                     self.recorded += 1
             except zenoh.ZError:           # empty and closed: the subscriber is undeclared
                 pass

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import socket
 import time
 from dataclasses import dataclass, field
@@ -40,12 +41,16 @@ log = logging.getLogger(__name__)
 
 MODE_NAMES = {0: "TRACK", 1: "AVOID", 2: "ROTATE"}
 
-# Zenoh's runtime for every process of a SITL swarm (zenoh-runtime's ZENOH_RUNTIME syntax):
-# one thread instead of five or six. Dozens of processes on a few cores then spend less CPU
-# handing each message between threads (30 robots: 0 missed periods, neighbour-state age p99
-# 25 ms instead of 44). A ZENOH_RUNTIME already in the environment is kept.
+# Zenoh's runtime for the agents and plants of a SITL swarm (zenoh-runtime's ZENOH_RUNTIME
+# syntax): one thread instead of five or six. Dozens of processes on a few cores then spend
+# less CPU handing each message between threads (30 robots: neighbour-state age p99 25 ms
+# instead of 44 in an A/B pair of runs). A ZENOH_RUNTIME in the launcher's environment wins.
 ZENOH_RUNTIME = ("(rx: (worker_threads: 1), app: (handover: rx), tx: (handover: rx), "
                  "acc: (handover: rx), net: (handover: rx))")
+
+
+def _child_env() -> dict[str, str]:
+    return {"ZENOH_RUNTIME": os.environ.get("ZENOH_RUNTIME", ZENOH_RUNTIME)}
 
 
 class SitlError(RuntimeError):
@@ -180,7 +185,8 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                 agents[s.robot_id] = children.start(
                     f"agent_{s.robot_id}",
                     ["agent", "--config", str(config_dir / f"robot_{s.robot_id}.toml"),
-                     "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")])
+                     "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")],
+                    env=_child_env())
             _write_manifest(out, sc, settings, endpoint, swarm,
                             {c.name: c.pid for c in children.children})
             console.print(f"{len(agents)} agents starting ...")
@@ -239,7 +245,7 @@ def _start_plants(children: Children, sc: Scenario, opts: SitlOptions, swarm: st
                      "--can-base-port", str(opts.can_base_port)]
         elif opts.can_channel:
             args += ["--can-channel", opts.can_channel]
-        children.start(f"plant_{k // size}", args)
+        children.start(f"plant_{k // size}", args, env=_child_env())
 
 
 def _write_manifest(out: Path, sc: Scenario, settings: list[AgentSettings], endpoint: str,

@@ -38,8 +38,10 @@ def _at(times: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def missed_in(loop_stats: dict, start: float, end: float) -> int:
     """Periods a loop skipped (its ``overrun_events``, UNIX times) between ``start`` and
-    ``end`` [s]: the deadline misses of a mission, apart from start-up and shut-down."""
-    return sum(n for t, n in loop_stats["overrun_events"] if start <= t <= end)
+    ``end`` [s]: the deadline misses of a mission, apart from start-up and shut-down. Those
+    past the loop's event log (``overruns_unlogged``) are counted in, as they may be."""
+    return (sum(n for t, n in loop_stats["overrun_events"] if start <= t <= end)
+            + loop_stats.get("overruns_unlogged", 0))
 
 
 def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, dict]:

@@ -53,6 +53,9 @@ def test_overrun_skips_missed_ticks_instead_of_catching_up():
     assert loop.stats.overruns == 3
     # when (UNIX time) and by how much: tick 3 started at 0.06 s and ended at 0.125 s
     assert loop.stats.summary()["overrun_events"] == [[round(wall0 + 0.125, 3), 3]]
+    loop.stats.overrun_events.extend([(0.0, 1)] * (loop.stats.MAX_EVENTS - 1))
+    loop.stats.overrun(wall0 + 9.0, 2)                  # the log is full: counted apart
+    assert loop.stats.summary()["overruns_unlogged"] == 2 and loop.stats.overruns == 5
 
 
 def test_stop_from_inside_a_tick():

@@ -95,7 +95,7 @@ def test_steady_flow_frames_are_the_bytes_cantools_makes_from_the_dbc():
     from transport.odrive_frames import (ENCODER_ESTIMATES, INPUT_VEL, FLOAT_FRAMES, database,
                                          float32_layout)
     values = [0.0, -0.0, 1e-40, 1.0 / 3.0, -123.456789, 5e7, 3.3e38, -3.3e38]
-    for cmd, (layout, names) in FLOAT_FRAMES.items():
+    for cmd, (_struct, names, _limits) in FLOAT_FRAMES.items():
         dbc = database().get_message_by_frame_id(int(cmd))
         for a in values:
             for b in values[:4]:
@@ -105,6 +105,16 @@ def test_steady_flow_frames_are_the_bytes_cantools_makes_from_the_dbc():
                 assert decode(msg).signals == dbc.decode(bytes(msg.data), decode_choices=False,
                                                          scaling=False)
     assert ENCODER_ESTIMATES.size == INPUT_VEL.size == 8
+    # what cantools refuses is refused the same way (or encoded the same way: NaN)
+    dbc = database().get_message_by_frame_id(int(Cmd.SET_INPUT_VEL))
+    for bad in (math.inf, -math.inf, 1e39, "1"):
+        with pytest.raises(Exception) as refused:
+            dbc.encode({"Input_Vel": bad, "Input_Torque_FF": 0.0}, strict=True)
+        with pytest.raises(refused.type):
+            encode(1, Cmd.SET_INPUT_VEL, Input_Vel=bad, Input_Torque_FF=0.0)
+    nan = encode(1, Cmd.SET_INPUT_VEL, Input_Vel=math.nan, Input_Torque_FF=0.0)
+    assert bytes(nan.data) == dbc.encode({"Input_Vel": math.nan, "Input_Torque_FF": 0.0},
+                                         strict=True)
     with pytest.raises(ValueError):
         float32_layout(Cmd.HEARTBEAT, "Axis_Error", "Axis_State")
     with pytest.raises(ValueError):

@@ -199,3 +199,23 @@ def test_without_zenoh_timestamps_log_time_is_the_recorders_clock(tmp_path):
     [(topic, kind, log_time, msg)] = read_messages(tmp_path / "run.mcap")
     assert (topic, kind, log_time, msg["stamp"]) == ("/boundswarm/t/robot/1/state", "state",
                                                      1234.5, 99.0)
+
+
+def test_a_failing_write_is_counted_and_the_channels_keep_emptying(sessions, tmp_path):
+    """A full disk must not stop the recorder from taking samples: Zenoh would block the
+    router's routing on a full channel."""
+    router, client = sessions
+    keys = Keys("t")
+    rec = Recorder(router, keys, tmp_path / "run.mcap")
+
+    def disk_full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+    rec._writer.add_message = disk_full
+    try:
+        time.sleep(0.3)
+        sent = publish_swarm(client, keys, ticks=100)
+        total = sum(map(len, sent.values()))
+        assert wait_for(lambda: rec.dropped["write_error"] >= total)
+        assert rec.recorded == 0 and rec.dropped["write_error"] == total
+    finally:
+        rec.close()

@@ -1,5 +1,6 @@
 """Zenoh link over a router on loopback (scouting off): keys, latest values, presence."""
 import socket
+import threading
 import time
 
 import pytest
@@ -140,7 +141,9 @@ def test_near_states_subscribe_to_near_robots_only(sessions):
 
     a, b = sessions
     keys = Keys("near")
-    me = SwarmLink(a, keys, 1, time.time, near_radius=10.0)
+    setup_in = []
+    me = SwarmLink(a, keys, 1, time.time, near_radius=10.0,
+                   thread_setup=lambda: setup_in.append(threading.current_thread().name))
     near, far = SwarmLink(b, keys, 2, time.time), SwarmLink(b, keys, 3, time.time)
 
     def at(link, rid, seq, x):
@@ -171,6 +174,9 @@ def test_near_states_subscribe_to_near_robots_only(sessions):
         # robot 3 comes near, robot 2 goes far beyond radius + hysteresis
         round_(30.0, 4.0, 1.0)
         assert me.counters()["near"] == [3]
+        # robot 2's dropped subscription still counts; the refocus thread ran the setup
+        assert me.counters()["states"]["accepted"] > c["states"]["accepted"]
+        assert setup_in == ["near-refocus-1"]
         last = me.neighbours()[3].msg
         assert last.x == 4.0 and time.time() - last.stamp < 0.2   # full rate, fresh
     finally:

@@ -59,6 +59,8 @@ class EchoFilteredBus(can.BusABC):
         self.channel_info = inner.channel_info
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if msg.is_fd:
+            raise can.CanOperationError("cannot send an FD frame on a classic CAN bus")
         data = pack_message(msg)
         self._socket.send(data, timeout)
         self._sent.append((time.monotonic(), data))

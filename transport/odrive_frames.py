@@ -68,9 +68,16 @@ def float32_layout(cmd: Cmd, *names: str) -> struct.Struct:
     return struct.Struct("<" + "f" * len(names))
 
 
+def _limits(cmd: Cmd, names: tuple[str, ...]) -> tuple[tuple[float, float], ...]:
+    """(minimum, maximum) of each signal in the DBC."""
+    layout = _layout(cmd)
+    return tuple((layout.get_signal_by_name(n).minimum, layout.get_signal_by_name(n).maximum)
+                 for n in names)
+
+
 # The steady flow (about 100 frames per second per axis each way) packed by a struct checked
 # against the DBC at import: the same bytes as cantools, for a fraction of its cost.
-FLOAT_FRAMES = {cmd: (float32_layout(cmd, *names), names) for cmd, names in (
+FLOAT_FRAMES = {cmd: (float32_layout(cmd, *names), names, _limits(cmd, names)) for cmd, names in (
     (Cmd.GET_ENCODER_ESTIMATES, ("Pos_Estimate", "Vel_Estimate")),
     (Cmd.SET_INPUT_VEL, ("Input_Vel", "Input_Torque_FF")))}
 ENCODER_ESTIMATES = FLOAT_FRAMES[Cmd.GET_ENCODER_ESTIMATES][0]
@@ -133,13 +140,21 @@ class Frame:
 def encode(node: int, cmd: Cmd, **signals: float) -> can.Message:
     """A data frame of ``cmd`` for ``node`` with the given signal values."""
     fast = FLOAT_FRAMES.get(cmd)
-    if fast is not None and signals.keys() == set(fast[1]):
+    if fast is not None and signals.keys() == set(fast[1]) and _within(signals, fast):
         data = fast[0].pack(*(signals[name] for name in fast[1]))
-    else:
+    else:                       # cantools, also for the errors: EncodeError names the signal
         layout = _layout(cmd)
         data = layout.encode(signals, strict=True) if layout.signals else b""
     return can.Message(arbitration_id=arbitration_id(node, cmd), data=data,
                        is_extended_id=False)
+
+
+def _within(signals: dict, fast: tuple) -> bool:
+    """Every value a number within its signal's DBC limits (NaN is not)."""
+    try:
+        return all(lo <= signals[n] <= hi for n, (lo, hi) in zip(fast[1], fast[2]))
+    except TypeError:                                   # not a number
+        return False
 
 
 def request(node: int, cmd: Cmd) -> can.Message:

@@ -194,9 +194,9 @@ class Latest(Generic[M]):
     def close(self) -> None:
         """Undeclare the subscription (safe while another thread takes a snapshot)."""
         with self._lock:
-            if self._sub is not None:
-                self._sub.undeclare()
-                self._sub = None
+            sub, self._sub = self._sub, None
+        if sub is not None:            # outside the lock: a snapshot never waits on Zenoh
+            sub.undeclare()
 
 
 class Presence:
@@ -260,7 +260,10 @@ class NearStates:
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
                  clock: Callable[[], float], radius: float, hysteresis: float = 2.0,
-                 period: float = 0.1):
+                 period: float = 0.1, thread_setup: Callable[[], object] | None = None):
+        """``thread_setup`` runs first in the refocus thread (e.g. the loop's real-time
+        scheduling, so that a thread taking the interpreter lock is never starved while the
+        loop waits for it)."""
         self._session, self._keys, self._clock = session, keys, clock
         self.radius, self.hysteresis = radius, hysteresis
         self.beacons = Latest(session, keys.beacon("*"), StateMsg.decode, clock,
@@ -272,7 +275,7 @@ class NearStates:
         self._snapshot: Mapping[int, Received[StateMsg]] = MappingProxyType({})
         self._focus: tuple[float, float] | None = None
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._refocus_loop, args=(period,),
+        self._thread = threading.Thread(target=self._refocus_loop, args=(period, thread_setup),
                                         name=f"near-refocus-{robot_id}", daemon=True)
         self._thread.start()
 
@@ -286,33 +289,51 @@ class NearStates:
             self.beacons.snapshot(), *(sub.snapshot() for sub in near.values())))
         return self._snapshot
 
-    def _refocus_loop(self, period: float) -> None:
+    def _refocus_loop(self, period: float, setup: Callable[[], object] | None) -> None:
+        if setup is not None:
+            setup()
         while not self._stop.wait(period):
-            if self._focus is not None:
+            if self._focus is None:
+                continue
+            try:
                 self.refocus(*self._focus)
+            except zenoh.ZError:                # e.g. the session closing: try again later
+                log.exception("near set not revised")
 
     def refocus(self, x: float, y: float) -> None:
         """Subscribe to the robots now near (x, y) [m], drop those gone far."""
         near = dict(self.near)
-        gone = []
-        for rid, rec in self._snapshot.items():
-            d = ((rec.msg.x - x) ** 2 + (rec.msg.y - y) ** 2) ** 0.5
-            if rid not in near and d <= self.radius:
-                near[rid] = Latest(self._session, self._keys.state(rid), StateMsg.decode,
-                                   self._clock, capacity=8)
-            elif rid in near and d > self.radius + self.hysteresis:
-                gone.append(near.pop(rid))
-        self.near = MappingProxyType(near)
-        for sub in gone:
-            with self._counter_lock:
+        new, gone = [], []
+        try:
+            for rid, rec in self._snapshot.items():
+                d = ((rec.msg.x - x) ** 2 + (rec.msg.y - y) ** 2) ** 0.5
+                if rid not in near and d <= self.radius:
+                    near[rid] = Latest(self._session, self._keys.state(rid), StateMsg.decode,
+                                       self._clock, capacity=8)
+                    new.append(near[rid])
+                elif rid in near and d > self.radius + self.hysteresis:
+                    gone.append(near.pop(rid))
+        except BaseException:
+            for sub in new:                     # never published: undeclare them here
+                sub.close()
+            raise
+        if self._stop.is_set():                 # closing meanwhile: it owns self.near
+            for sub in new:
+                sub.close()
+            return
+        with self._counter_lock:                # counters() sees each sub once
+            self.near = MappingProxyType(near)
+            for sub in gone:
                 _add_counters(self._closed, sub.counters())
+        for sub in gone:
             sub.close()
 
     def counters(self) -> dict:
         """Full-rate state counters (as :meth:`Latest.counters`), closed subscriptions included."""
         with self._counter_lock:
             total = {**self._closed, "dropped": Counter(self._closed["dropped"])}
-        for sub in self.near.values():
+            near = self.near
+        for sub in near.values():
             _add_counters(total, sub.counters())
         return {**total, "dropped": dict(total["dropped"])}
 
@@ -328,19 +349,22 @@ class SwarmLink:
     """One agent's Zenoh link (agent.ports.SwarmPort): its state out (and a beacon every
     ``BEACON_PERIOD``); neighbours, its obstacles and the mission in; a liveliness token
     while it runs. ``near_radius`` [m] > 0 takes full-rate states only from robots within
-    it (:class:`NearStates`); 0 takes every robot's."""
+    it (:class:`NearStates`; ``thread_setup`` runs first in its refocus thread); 0 takes every
+    robot's."""
 
     BEACON_PERIOD = 0.2        # s
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
-                 clock: Callable[[], float], near_radius: float = 0.0):
+                 clock: Callable[[], float], near_radius: float = 0.0,
+                 thread_setup: Callable[[], object] | None = None):
         self.keys, self.robot_id = keys, robot_id
         self._pub = session.declare_publisher(keys.state(robot_id))
         self._beacon = session.declare_publisher(keys.beacon(robot_id))
         self._beacon_due = 0.0
         self._token = session.liveliness().declare_token(keys.robot(robot_id))
         self.states: Latest[StateMsg] | NearStates = (
-            NearStates(session, keys, robot_id, clock, near_radius) if near_radius > 0 else
+            NearStates(session, keys, robot_id, clock, near_radius,
+                       thread_setup=thread_setup) if near_radius > 0 else
             Latest(session, keys.state("*"), StateMsg.decode, clock, ignore=[robot_id]))
         self._obstacles = Latest(session, keys.obstacles(robot_id), ObstaclesMsg.decode, clock)
         self._mission = Latest(session, keys.mission, MissionMsg.decode, clock)
