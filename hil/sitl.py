@@ -41,8 +41,8 @@ log = logging.getLogger(__name__)
 
 MODE_NAMES = {0: "TRACK", 1: "AVOID", 2: "ROTATE"}
 
-# Zenoh's runtime for the agents and plants of a SITL swarm (zenoh-runtime's ZENOH_RUNTIME
-# syntax): one thread instead of five or six. Dozens of processes on a few cores then spend
+# Zenoh's runtime for the processes of a SITL swarm (zenoh-runtime's ZENOH_RUNTIME syntax):
+# one thread instead of five or six. Dozens of processes on a few cores then spend
 # less CPU handing each message between threads (30 robots: neighbour-state age p99 25 ms
 # instead of 44 in an A/B pair of runs). A ZENOH_RUNTIME in the launcher's environment wins.
 ZENOH_RUNTIME = ("(rx: (worker_threads: 1), app: (handover: rx), tx: (handover: rx), "
@@ -139,7 +139,10 @@ def _status_table(sc: Scenario, states: dict, truth: dict, presence: frozenset,
 
 
 def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> SitlRun:
-    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen."""
+    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. The
+    launcher's own router takes ZENOH_RUNTIME too if its Zenoh has not started yet (the
+    variable is read once per process)."""
+    os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     out.mkdir(parents=True, exist_ok=True)
     run = SitlRun()
     swarm = _swarm_name(sc)
