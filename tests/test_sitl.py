@@ -19,6 +19,7 @@ import zenoh
 from firmware_sim.batch import SimOptions, simulate
 from hil.run_folder import read_run
 from hil.scenario import load_scenario
+from transport.payloads import MissionMsg
 from procs import alive
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -140,13 +141,22 @@ def test_sigkill_of_an_agent_and_malformed_payloads(launch):
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("connect/endpoints", json.dumps([manifest["zenoh_router"]]))
     session = zenoh.open(conf)
+    missions = []
+    sub = session.declare_subscriber(f"boundswarm/{manifest['swarm']}/mission",
+                                     lambda sample: missions.append(sample.payload.to_bytes()))
     try:
-        time.sleep(4.0)                          # agents up, mission started
+        deadline = time.monotonic() + 60
+        while not missions and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert missions, "no mission published"
+        epoch = MissionMsg.decode(missions[0]).epoch
+        time.sleep(max(0.0, epoch + 1.0 - time.time()))     # moving, before the obstacle
         for _ in range(5):
             session.put(f"boundswarm/{manifest['swarm']}/robot/1/state", b"\x01\x01garbage")
             time.sleep(0.05)
         os.kill(victim, signal.SIGKILL)
     finally:
+        sub.undeclare()
         session.close()
     code, out = run.wait(timeout=90)
     assert code == 3, out                        # a process was lost, the run was safe
