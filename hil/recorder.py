@@ -58,10 +58,10 @@ def _numbers_json(cls) -> Callable[[bytes], tuple[bytes, float]]:
     """_any_json, faster, for a message of numbers only: a template writes its fields, %r a
     float as json does (decode refuses non-finite ones), %d an int or an IntFlag as a plain
     int."""
-    names = [f.name for f in dataclasses.fields(cls)]
+    fields = dataclasses.fields(cls)
     template = ("{" + ", ".join(f'"{f.name}": %{"r" if f.type in ("float", float) else "d"}'
-                                for f in dataclasses.fields(cls)) + "}").encode()
-    values = operator.attrgetter(*names)
+                                for f in fields) + "}").encode()
+    values = operator.attrgetter(*(f.name for f in fields))
 
     def encode(payload: bytes) -> tuple[bytes, float]:
         msg = cls.decode(payload)

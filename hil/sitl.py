@@ -49,10 +49,6 @@ ZENOH_RUNTIME = ("(rx: (worker_threads: 1), app: (handover: rx), tx: (handover: 
                  "acc: (handover: rx), net: (handover: rx))")
 
 
-def _child_env() -> dict[str, str]:
-    return {"ZENOH_RUNTIME": os.environ.get("ZENOH_RUNTIME", ZENOH_RUNTIME)}
-
-
 class SitlError(RuntimeError):
     """The swarm could not be started or lost its plant."""
 
@@ -139,9 +135,9 @@ def _status_table(sc: Scenario, states: dict, truth: dict, presence: frozenset,
 
 
 def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> SitlRun:
-    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. The
-    launcher's own router takes ZENOH_RUNTIME too if its Zenoh has not started yet (the
-    variable is read once per process)."""
+    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. Its
+    processes inherit ZENOH_RUNTIME; the launcher's own router takes it too if its Zenoh has
+    not started yet (the variable is read once per process)."""
     os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     out.mkdir(parents=True, exist_ok=True)
     run = SitlRun()
@@ -188,8 +184,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                 agents[s.robot_id] = children.start(
                     f"agent_{s.robot_id}",
                     ["agent", "--config", str(config_dir / f"robot_{s.robot_id}.toml"),
-                     "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")],
-                    env=_child_env())
+                     "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")])
             _write_manifest(out, sc, settings, endpoint, swarm,
                             {c.name: c.pid for c in children.children})
             console.print(f"{len(agents)} agents starting ...")
@@ -248,7 +243,7 @@ def _start_plants(children: Children, sc: Scenario, opts: SitlOptions, swarm: st
                      "--can-base-port", str(opts.can_base_port)]
         elif opts.can_channel:
             args += ["--can-channel", opts.can_channel]
-        children.start(f"plant_{k // size}", args, env=_child_env())
+        children.start(f"plant_{k // size}", args)
 
 
 def _write_manifest(out: Path, sc: Scenario, settings: list[AgentSettings], endpoint: str,

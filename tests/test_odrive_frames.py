@@ -95,7 +95,8 @@ def test_steady_flow_frames_are_the_bytes_cantools_makes_from_the_dbc():
     from transport.odrive_frames import (ENCODER_ESTIMATES, INPUT_VEL, FLOAT_FRAMES, database,
                                          float32_layout)
     values = [0.0, -0.0, 1e-40, 1.0 / 3.0, -123.456789, 5e7, 3.3e38, -3.3e38]
-    for cmd, (_struct, names, _limits) in FLOAT_FRAMES.items():
+    for cmd, frame in FLOAT_FRAMES.items():
+        names = frame.names
         dbc = database().get_message_by_frame_id(int(cmd))
         for a in values:
             for b in values[:4]:

@@ -10,6 +10,7 @@ from mcap.reader import make_reader
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hil.processes import wait_until
 from hil.recorder import ENCODERS, Recorder, read_messages
 from transport.payloads import (MissionMsg, ObstaclesMsg, PayloadError, StateFlags, StateMsg,
                                 TruthMsg, WheelsMsg)
@@ -92,14 +93,6 @@ def sessions():
         router.close()
 
 
-def wait_for(cond, timeout=10.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        time.sleep(0.01)
-    return False
-
 
 def publish_swarm(session, keys, ticks: int) -> dict[str, set]:
     """States, truths and obstacles of 5 robots, beacons and wheels (not recorded), a mission
@@ -143,7 +136,7 @@ def test_every_published_message_is_recorded_once(sessions, tmp_path):
         time.sleep(0.3)
         sent = publish_swarm(client, keys, ticks=200)
         total = sum(map(len, sent.values()))
-        assert wait_for(lambda: rec.recorded >= total)
+        assert wait_until(lambda: rec.recorded >= total, 10.0, poll=0.01)
     finally:
         rec.close()
     got = recorded(tmp_path / "run.mcap")
@@ -167,7 +160,7 @@ def test_close_writes_what_arrived_and_not_yet_written(sessions, tmp_path):
     try:
         time.sleep(0.3)
         sent = publish_swarm(client, keys, ticks=100)
-        assert wait_for(lambda: len(arrived) >= len(sent["truth"]))
+        assert wait_until(lambda: len(arrived) >= len(sent["truth"]), 10.0, poll=0.01)
         time.sleep(0.2)
         assert rec.recorded == 0
     finally:
@@ -191,7 +184,7 @@ def test_without_zenoh_timestamps_log_time_is_the_recorders_clock(tmp_path):
         time.sleep(0.3)
         client.put(keys.state(1), StateMsg(1, 1, 99.0, 0, 0, 0, 0, 0, 0, 0, 0,
                                            StateFlags(0)).encode())
-        assert wait_for(lambda: rec.recorded == 1)
+        assert wait_until(lambda: rec.recorded == 1, 10.0, poll=0.01)
     finally:
         rec.close()
         client.close()
@@ -215,7 +208,7 @@ def test_a_failing_write_is_counted_and_the_channels_keep_emptying(sessions, tmp
         time.sleep(0.3)
         sent = publish_swarm(client, keys, ticks=100)
         total = sum(map(len, sent.values()))
-        assert wait_for(lambda: rec.dropped["write_error"] >= total)
+        assert wait_until(lambda: rec.dropped["write_error"] >= total, 10.0, poll=0.01)
         assert rec.recorded == 0 and rec.dropped["write_error"] == total
     finally:
         rec.close()

@@ -5,6 +5,7 @@ import time
 
 import pytest
 
+from hil.processes import wait_until
 from transport.payloads import StateFlags, StateMsg
 from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
 
@@ -28,14 +29,6 @@ def sessions():
         for s in reversed(opened):
             s.close()
 
-
-def wait_for(cond, timeout=5.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        time.sleep(0.01)
-    return False
 
 
 def state(rid, seq, stamp):
@@ -68,7 +61,7 @@ def test_latest_value_cache_drops_malformed_and_own(sessions):
         a.put(keys.state(2), b"garbage")
         a.put(keys.state(9), state(9, 0, 1.0).encode())          # own id: ignored
         a.put(keys.state(1), state(1, 99, 50.0).encode())        # older stamp: out of order
-        assert wait_for(lambda: cache.counters()["received"] >= 8)
+        assert wait_until(lambda: cache.counters()["received"] >= 8, 5.0, poll=0.01)
         snap = cache.snapshot()
         assert list(snap) == [1] and snap[1].msg.seq == 4
         assert dict(snap_before) == {}                            # snapshots never change
@@ -86,9 +79,9 @@ def test_presence_join_and_leave(sessions):
     presence = Presence(b, keys)
     try:
         token = a.liveliness().declare_token(keys.robot(4))
-        assert wait_for(lambda: presence.alive() == {4})
+        assert wait_until(lambda: presence.alive() == {4}, 5.0, poll=0.01)
         token.undeclare()
-        assert wait_for(lambda: presence.alive() == frozenset())
+        assert wait_until(lambda: presence.alive() == frozenset(), 5.0, poll=0.01)
         assert presence.left[4] == 1
     finally:
         presence.close()
@@ -121,11 +114,11 @@ def test_swarm_link_between_two_agents_and_a_recording(sessions, tmp_path):
         a.put(keys.mission, MissionMsg(1, time.time(), time.time(), (0.0, 0.0), (1.0, 0.0),
                                        0.0, np.array([1, 2]), np.zeros((2, 2))).encode())
         a.put(keys.state(5), b"\x01\x01bad")
-        assert wait_for(lambda: two.mission() is not None and two.obstacles() is not None
-                        and 1 in two.neighbours())
+        assert wait_until(lambda: two.mission() is not None and two.obstacles() is not None
+                          and 1 in two.neighbours(), 5.0, poll=0.01)
         assert two.obstacles().radii.tolist() == [0.5] and one.mission().ids.tolist() == [1, 2]
         assert 2 not in two.neighbours()                        # own state not a neighbour
-        assert wait_for(lambda: rec.recorded >= 3)
+        assert wait_until(lambda: rec.recorded >= 3, 5.0, poll=0.01)
     finally:
         one.close()
         two.close()
