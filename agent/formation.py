@@ -73,6 +73,14 @@ class Formation:
                                                                           r_off[:, 0]])
         return p, pdot
 
+    def point(self, i: int, t: float) -> tuple[float, float]:
+        """:meth:`reference` position [m] of robot ``i`` at time t [s] in plain floats (an
+        agent's own reference, every period)."""
+        ox, oy = self.offsets[i].tolist()
+        c, s = math.cos(self.omega * t), math.sin(self.omega * t)
+        return (self.center0[0] + self.velocity[0] * t + (ox * c - oy * s),
+                self.center0[1] + self.velocity[1] * t + (ox * s + oy * c))
+
     def min_spacing(self) -> float:
         """Smallest distance [m] between two reference positions (inf for one robot)."""
         n = len(self.offsets)

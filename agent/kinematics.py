@@ -87,3 +87,14 @@ def wheel_commands(v: np.ndarray, u: np.ndarray, wheel_radius: float, wheel_base
     wr, wl = wheel_speeds(v, u, wheel_radius, wheel_base)
     wr, wl = saturate_wheels(wr, wl, TWO_PI * speed_limit_rev_s)
     return wr / TWO_PI, wl / TWO_PI
+
+
+def wheel_command(v: float, u: float, wheel_radius: float, wheel_base: float,
+                  speed_limit_rev_s: float) -> tuple[float, float]:
+    """:func:`wheel_commands` for one robot in plain floats (an agent, every period)."""
+    half = 0.5 * wheel_base * u
+    wr, wl = (v + half) / wheel_radius, (v - half) / wheel_radius
+    limit = TWO_PI * speed_limit_rev_s
+    peak = max(abs(wr), abs(wl))
+    scale = limit / max(peak, 1e-300) if peak > limit else 1.0
+    return wr * scale / TWO_PI, wl * scale / TWO_PI

@@ -18,7 +18,9 @@ Theory of operation. Every period each robot picks one of three modes:
 Finally |u| is clipped to u_max; |v| <= K D_max holds by construction.
 
 The law is pure: arrays in, arrays out. Its mode memory (previous error, hysteresis flag,
-latched side and followed obstacle) is explicit state in :class:`LawMemory`.
+latched side and followed obstacle) is explicit state in :class:`LawMemory`. An agent runs
+the same law for its one robot through :mod:`agent.law_single` (plain floats, step for
+step the same; the tests run both).
 """
 from __future__ import annotations
 

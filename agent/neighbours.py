@@ -5,24 +5,60 @@ plus transport latency late. Before the law uses it, it is moved forward along i
 to the current time, for at most ``staleness`` seconds; a neighbour older than that is a
 robot that may have stopped, so it is kept, conservatively, as a static obstacle at its last
 known position (no extrapolation).
+
+One agent sees a few dozen states per period, so this runs in plain floats (numpy's cost
+per call would dominate); the arc is :func:`agent.kinematics.arc_step`, the same exact arc
+the swarm simulation integrates.
 """
 from __future__ import annotations
 
-import numpy as np
+import math
+from dataclasses import dataclass, field
+from typing import Iterable, Protocol
 
-from agent.kinematics import integrate_arc
+from agent.kinematics import arc_step
 
 
-def extrapolate(states: np.ndarray, stamps: np.ndarray, now: float, staleness: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """(positions (M, 2) [m] at ``now``, stale (M,) bool) for neighbour ``states`` (M, 5).
+class NeighbourState(Protocol):
+    """What a neighbour reports (transport.payloads.StateMsg has it)."""
 
-    ``stamps`` (M,) [s] are the states' timestamps on the same clock as ``now``. A stamp in
-    the future (clock skew) is treated as age 0.
+    stamp: float    # s, UNIX time
+    x: float        # m
+    y: float        # m
+    theta: float    # rad
+    v: float        # m/s
+    u: float        # rad/s
+
+
+@dataclass
+class InRange:
+    """Neighbours within range of a robot: positions [m] at ``now``."""
+
+    fresh: list[tuple[float, float]] = field(default_factory=list)  # extrapolated to now
+    stale: list[tuple[float, float]] = field(default_factory=list)  # at their last position
+    ages: list[float] = field(default_factory=list)  # s, now - stamp of each fresh one
+
+
+def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
+             staleness: float, reach: float) -> InRange:
+    """The neighbours within ``reach`` [m] of (x, y) at time ``now`` [s].
+
+    Fresh ones are moved along their arcs to ``now``; ones older than ``staleness`` [s] are
+    stale and stay where they were last seen. A stamp in the future (clock skew) is treated
+    as age 0.
     """
-    states = np.asarray(states, dtype=float).reshape(-1, 5)
-    age = np.maximum(now - np.asarray(stamps, dtype=float), 0.0)
-    stale = age > staleness
-    dt = np.where(stale, 0.0, age)
-    moved = integrate_arc(states[:, :3], states[:, 3], states[:, 4], dt)
-    return moved[:, :2], stale
+    out = InRange()
+    for m in states:
+        age = now - m.stamp
+        if age > staleness:
+            px, py = m.x, m.y
+        else:
+            dt = max(age, 0.0)
+            px, py, _ = arc_step(m.x, m.y, m.theta, m.v * dt, m.u * dt)
+        if math.hypot(px - x, py - y) <= reach:
+            if age > staleness:
+                out.stale.append((px, py))
+            else:
+                out.fresh.append((px, py))
+                out.ages.append(age)
+    return out

@@ -4,8 +4,9 @@ Theory of operation. Every tick the agent
 
 1. reads: drains the wheel drivers' feedback (odometry from the encoder positions), takes
    an immutable snapshot of its neighbours' states, its obstacle detections and the mission;
-2. updates: decides its mode and runs the pure law for itself (N = 1) with its neighbours
-   extrapolated to now (stale ones kept as static obstacles at their last position);
+2. updates: decides its mode and runs the pure law for itself (agent.law_single, the law for
+   one robot in floats) with its neighbours extrapolated to now (stale ones kept as static
+   obstacles at their last position);
 3. writes: the wheel velocities (curvature-preserving saturation) and its own state.
 
 Modes: DISARMED (drivers IDLE, nothing commanded), HOLD (zero velocity, watchdog fed) and
@@ -25,10 +26,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.formation import Formation
-from agent.kinematics import TWO_PI, body_velocity, wheel_commands
-from agent.law import LawInput, LawMemory, Mode, control_step
+from agent.kinematics import TWO_PI, body_velocity, wheel_command
+from agent.law import Mode
+from agent.law_single import SingleMemory, single_step
 from agent.loop import Clock
-from agent.neighbours import extrapolate
+from agent.neighbours import in_range
 from agent.odometry import Odometry
 from agent.ports import MotorPort, SwarmPort, WheelFeedback
 from agent.settings import AgentSettings
@@ -74,12 +76,12 @@ class Agent:
         self.failsafe: str | None = None
         self.odometry = Odometry(settings.robot.wheel_radius, settings.robot.wheel_base,
                                  np.array(settings.initial_pose, dtype=float))
-        self.memory = LawMemory.initial(1)
+        self.memory = SingleMemory()
         self.counters = AgentCounters()
         self.last_feedback: WheelFeedback | None = None
         self.command = (0.0, 0.0)          # (v [m/s], u [rad/s]) after saturation
         self.law_mode = Mode.TRACK
-        self.reference = np.array(settings.initial_pose[:2], dtype=float)
+        self.reference = tuple(map(float, settings.initial_pose[:2]))   # m
         self._seq = 0
         self._last_law = None              # monotonic time of the last law step
         self._mission_key: tuple | None = None
@@ -129,7 +131,7 @@ class Agent:
         if fb is not None:
             self.odometry.update(*fb.pos_rev)
         self.last_feedback = fb
-        pose = self.odometry.pose.copy()
+        pose = tuple(self.odometry.pose.tolist())
         mission = self.swarm.mission()
 
         # update
@@ -145,16 +147,15 @@ class Agent:
         # write
         if self.mode is not AgentMode.DISARMED:
             r = self.s.robot
-            right, left = wheel_commands(np.array([v]), np.array([u]), r.wheel_radius,
-                                         r.wheel_base, r.wheel_speed_limit)
-            right, left = float(right[0]), float(left[0])
+            right, left = wheel_command(v, u, r.wheel_radius, r.wheel_base,
+                                        r.wheel_speed_limit)
             if not (math.isfinite(right) and math.isfinite(left)):
                 self.counters.nonfinite_commands += 1
                 right = left = 0.0
             self.motor.command(right, left)
             v_sat, u_sat = body_velocity(TWO_PI * right, TWO_PI * left, r.wheel_radius,
                                          r.wheel_base)
-            self.command = (float(v_sat), float(u_sat))
+            self.command = (v_sat, u_sat)
         else:
             self.command = (0.0, 0.0)
         self._publish(pose, now_w)
@@ -204,51 +205,36 @@ class Agent:
                                             mission.velocity, mission.omega)
         return self._formation
 
-    def _formation_step(self, pose: np.ndarray, mission: MissionMsg | None, now_m: float,
-                        now_w: float) -> tuple[float, float]:
+    def _formation_step(self, pose: tuple[float, float, float], mission: MissionMsg | None,
+                        now_m: float, now_w: float) -> tuple[float, float]:
         if mission is None or now_w < mission.epoch:
             self._last_law = None
             return 0.0, 0.0
         formation = self._formation_place(mission)
         if formation is None:
             return 0.0, 0.0
-        ref, _ = formation.reference(now_w - mission.epoch)
-        self.reference = ref[0]
-        nbr_pos, obs_c, obs_r = self._surroundings(pose, now_w)
-        inp = LawInput(pose=pose[None, :], ref=ref,
-                       nbr_pos=nbr_pos[None], nbr_valid=np.ones((1, len(nbr_pos)), bool),
-                       obs_center=obs_c[None], obs_radius=obs_r[None],
-                       obs_valid=np.ones((1, len(obs_r)), bool))
+        self.reference = formation.point(0, now_w - mission.epoch)
+        nbrs, obstacles = self._surroundings(pose, now_w)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
-        out = control_step(inp, self.memory, self.s.control, dt=max(dt, 1e-6))
-        self.memory = out.memory
-        self.law_mode = Mode(int(out.mode[0]))
-        return float(out.v[0]), float(out.u[0])
+        v, u, self.law_mode, self.memory = single_step(
+            pose, self.reference, nbrs, obstacles, self.memory, self.s.control,
+            dt=max(dt, 1e-6))
+        return v, u
 
-    def _surroundings(self, pose: np.ndarray, now_w: float
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Neighbours in range (extrapolated to now) and obstacles, stale robots included
-        as static obstacles of radius a/2 at their last position."""
-        snap = self.swarm.neighbours()
-        states = [r.msg for rid, r in snap.items() if rid != self.s.robot_id]
-        if states:
-            arr = np.array([(m.x, m.y, m.theta, m.v, m.u) for m in states])
-            stamps = np.array([m.stamp for m in states])
-            pos, stale = extrapolate(arr, stamps, now_w, self.s.staleness)
-            near = np.hypot(*(pos - pose[:2]).T) <= self.s.sensing_range
-            for age in (now_w - stamps)[near & ~stale]:
-                self.counters.neighbour_age.append(age)
-            nbr = pos[near & ~stale]
-            stale_pos = pos[near & stale]
-        else:
-            nbr, stale_pos = np.zeros((0, 2)), np.zeros((0, 2))
+    def _surroundings(self, pose: tuple[float, float, float], now_w: float
+                      ) -> tuple[list[tuple[float, float]], list[tuple[float, float, float]]]:
+        """Neighbours in range [m] (extrapolated to now) and obstacles (x, y, radius) [m],
+        stale robots included as static obstacles of radius a/2 at their last position."""
+        me = self.s.robot_id
+        near = in_range((r.msg for rid, r in self.swarm.neighbours().items() if rid != me),
+                        pose[0], pose[1], now_w, self.s.staleness, self.s.sensing_range)
+        self.counters.neighbour_age.extend(near.ages)
         obs = self.swarm.obstacles()
-        centers = obs.centers if obs is not None else np.zeros((0, 2))
-        radii = obs.radii if obs is not None else np.zeros(0)
-        centers = np.vstack([centers, stale_pos])
-        radii = np.concatenate([radii, np.full(len(stale_pos), self.s.control.a / 2)])
-        return nbr.reshape(-1, 2), centers.reshape(-1, 2), radii
+        obstacles = ([(x, y, r) for (x, y), r in zip(obs.centers.tolist(), obs.radii.tolist())]
+                     if obs is not None else [])
+        obstacles += [(x, y, self.s.control.a / 2) for x, y in near.stale]
+        return near.fresh, obstacles
 
     def flags(self) -> StateFlags:
         f = StateFlags(0)
@@ -260,13 +246,11 @@ class Agent:
             f |= StateFlags.FAILSAFE
         return f
 
-    def _publish(self, pose: np.ndarray, now_w: float) -> None:
+    def _publish(self, pose: tuple[float, float, float], now_w: float) -> None:
         self._seq += 1
         v, u = self.command
-        self.swarm.publish(StateMsg(self.s.robot_id, self._seq, now_w, float(pose[0]),
-                                    float(pose[1]), float(pose[2]), v, u,
-                                    float(self.reference[0]), float(self.reference[1]),
-                                    int(self.law_mode), self.flags()))
+        self.swarm.publish(StateMsg(self.s.robot_id, self._seq, now_w, *pose, v, u,
+                                    *self.reference, int(self.law_mode), self.flags()))
 
     def shutdown(self) -> None:
         """Zero velocity, then IDLE."""

@@ -109,8 +109,8 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     clock.now += 1.0                           # older than the 0.5 s staleness
     a.arm()
     a.set_mode(AgentMode.FORMATION)
-    nbr, centers, radii = a._surroundings(a.odometry.pose, clock.wall())
-    assert len(nbr) == 0 and centers.tolist() == [[4.0, 0.0]] and radii.tolist() == [0.5]
+    nbr, obstacles = a._surroundings(tuple(a.odometry.pose), clock.wall())
+    assert nbr == [] and obstacles == [(4.0, 0.0, 0.5)]
     dmin = np.inf
     for _ in range(400):
         a.tick()

@@ -44,3 +44,12 @@ def test_offsets_kind_needs_explicit_offsets():
     with pytest.raises(ValueError, match="explicit offsets"):
         formation_offsets(FormationKind.OFFSETS, 3, 1.0)
     assert math.isinf(Formation(np.zeros((1, 2)), (0.0, 0.0)).min_spacing())
+
+
+def test_point_is_one_robots_reference_in_floats():
+    f = Formation(formation_offsets(FormationKind.WEDGE, 5, 3.0), (2.0, -1.0), (0.7, 0.2), 0.3)
+    for t in (0.0, 1.3, 17.9):
+        p, _ = f.reference(t)
+        for i in range(5):
+            got = f.point(i, t)
+            assert type(got[0]) is float and got == pytest.approx(tuple(p[i]), abs=1e-12)

@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.kinematics import (body_velocity, integrate_arc, saturate_wheels, wheel_commands,
-                              wheel_speeds, wrap_angle)
+from agent.kinematics import (body_velocity, integrate_arc, saturate_wheels, wheel_command,
+                              wheel_commands, wheel_speeds, wrap_angle)
 
 
 def test_wrap_angle_range():
@@ -65,3 +65,17 @@ def test_scalar_arc_step_is_integrate_arc(x, y, theta, dist, dtheta):
     got = arc_step(x, y, theta, dist, dtheta)
     assert np.allclose(got[:2], want[:2], atol=1e-9)
     assert abs(wrap_angle(got[2] - want[2])) < 1e-9 and -np.pi < got[2] <= np.pi
+
+
+@given(st.floats(-50, 50), st.floats(-50, 50))
+def test_one_robots_wheel_command_equals_the_vectorised_one(v, u):
+    want = wheel_commands(np.array([v]), np.array([u]), 0.1, 0.5, 5.0)
+    got = wheel_command(v, u, 0.1, 0.5, 5.0)
+    assert got == pytest.approx((want[0][0], want[1][0]), rel=1e-12, abs=1e-15)
+
+
+@pytest.mark.parametrize("v, u", [(math.nan, 0.0), (0.0, math.nan), (math.inf, 0.0),
+                                  (1.0, -math.inf)])
+def test_one_robots_wheel_command_is_not_finite_for_bad_input(v, u):
+    """The agent turns such a command into zero velocity; it must not look finite."""
+    assert not all(map(math.isfinite, wheel_command(v, u, 0.1, 0.5, 5.0)))

@@ -1,4 +1,5 @@
-"""Unit tests of the three-mode bounded law and each of DESIGN.md's additions."""
+"""Unit tests of the three-mode bounded law and each of DESIGN.md's additions, on both its
+implementations (agent.law, vectorised; agent.law_single, one robot in floats)."""
 import dataclasses
 import math
 
@@ -7,9 +8,17 @@ import pytest
 
 from agent.config import ControlParams
 from agent.law import LawMemory, Mode
+import lawcase
 from lawcase import single, step
 
 P = ControlParams()
+
+
+@pytest.fixture(autouse=True, params=lawcase.IMPLS)
+def impl(request, monkeypatch):
+    """Every test runs on both implementations of the law."""
+    monkeypatch.setattr(lawcase, "IMPL", request.param)
+    return request.param
 
 
 def motion(out, theta):
@@ -186,19 +195,3 @@ def test_heading_rate_feed_forward_from_the_error_difference():
                               has_prev=np.array([True]))
     out = step(single([0, 0, 0], [10, 0]), mem)
     assert out.u[0] == pytest.approx(0.01 / P.period, rel=1e-3)
-
-
-def test_the_law_is_vectorised_row_by_row():
-    rng = np.random.default_rng(3)
-    cases = [single([*rng.uniform(-5, 5, 2), rng.uniform(-3, 3)], rng.uniform(-9, 9, 2),
-                    nbrs=[rng.uniform(-3, 3, 2)], obstacles=[((0.0, 0.0), 1.5)])
-             for _ in range(6)]
-    stacked = dataclasses.replace(
-        cases[0], **{f.name: np.concatenate([getattr(c, f.name) for c in cases])
-                     for f in dataclasses.fields(cases[0])})
-    together = step(stacked)
-    for i, c in enumerate(cases):
-        alone = step(c)
-        assert together.v[i] == pytest.approx(alone.v[0])
-        assert together.u[i] == pytest.approx(alone.u[0])
-        assert together.mode[i] == alone.mode[0]
