@@ -1,0 +1,64 @@
+"""Cost of one robot's law step: agent.law (vectorised, N = 1) against agent.law_single.
+
+Median over repeated steps of a robot that sees three neighbours and an obstacle, run back
+to back (hot caches) and after sweeping 16 MB of memory between steps (cold caches, as on a
+robot computer or a SITL host running many processes).
+
+    .venv/bin/python bench/law_step.py
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from agent.config import ControlParams
+from agent.law import LawInput, LawMemory, control_step
+from agent.law_single import SingleMemory, single_step
+
+POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0)
+NBRS, OBSTACLES = [(2.0, 1.0), (3.0, -2.0), (-1.0, 4.0)], [(6.0, 0.0, 1.0)]
+
+
+def vectorised(p: ControlParams):
+    inp = LawInput(pose=np.array([POSE]), ref=np.array([REF]), nbr_pos=np.array([NBRS]),
+                   nbr_valid=np.ones((1, len(NBRS)), bool),
+                   obs_center=np.array([[o[:2] for o in OBSTACLES]]),
+                   obs_radius=np.array([[o[2] for o in OBSTACLES]]),
+                   obs_valid=np.ones((1, len(OBSTACLES)), bool))
+    return LawMemory.initial(1), lambda mem: control_step(inp, mem, p, dt=p.period).memory
+
+
+def single(p: ControlParams):
+    return SingleMemory(), lambda mem: single_step(POSE, REF, NBRS, OBSTACLES, mem, p,
+                                                   p.period)[3]
+
+
+def median_us(setup, p: ControlParams, steps: int, sweep: np.ndarray | None) -> float:
+    mem, step = setup(p)
+    times = []
+    for _ in range(steps):
+        if sweep is not None:
+            sweep += 1.0
+        t0 = time.perf_counter_ns()
+        mem = step(mem)
+        times.append(time.perf_counter_ns() - t0)
+    return float(np.median(times)) / 1e3
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--steps", type=int, default=2000)
+    args = ap.parse_args()
+    p = ControlParams()
+    sweep = np.ones(16 * 2**20 // 8)
+    print(f"{'law step':<22} {'hot [us]':>9} {'cold [us]':>10}")
+    for name, setup in (("agent.law (N = 1)", vectorised), ("agent.law_single", single)):
+        hot = median_us(setup, p, args.steps, None)
+        cold = median_us(setup, p, args.steps // 4, sweep)
+        print(f"{name:<22} {hot:9.1f} {cold:10.1f}")
+
+
+if __name__ == "__main__":
+    main()
