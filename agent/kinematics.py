@@ -19,6 +19,12 @@ def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
     return np.where(wrapped == -np.pi, np.pi, wrapped)
 
 
+def wrap_scalar(angle: float) -> float:
+    """:func:`wrap_angle` of one float [rad], in plain floats."""
+    wrapped = (angle + math.pi) % math.tau - math.pi
+    return math.pi if wrapped == -math.pi else wrapped
+
+
 def integrate_arc(pose: np.ndarray, v: np.ndarray, u: np.ndarray, dt: float | np.ndarray
                   ) -> np.ndarray:
     """Exact unicycle motion over ``dt`` [s] at constant (v [m/s], u [rad/s]).
@@ -49,9 +55,8 @@ def arc_step(x: float, y: float, theta: float, dist: float, dtheta: float
     half = 0.5 * dtheta
     sinc = 1.0 - half * half / 6.0 if abs(half) < 1e-4 else math.sin(half) / half
     mid = theta + half
-    wrapped = (theta + dtheta + math.pi) % math.tau - math.pi
     return (x + dist * sinc * math.cos(mid), y + dist * sinc * math.sin(mid),
-            math.pi if wrapped == -math.pi else wrapped)
+            wrap_scalar(theta + dtheta))
 
 
 def wheel_speeds(v: np.ndarray, u: np.ndarray, wheel_radius: float, wheel_base: float

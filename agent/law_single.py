@@ -17,6 +17,7 @@ from typing import Sequence
 
 from agent.avoidance import EPS
 from agent.config import ControlParams
+from agent.kinematics import wrap_scalar
 from agent.law import Mode
 
 HALF_PI = math.pi / 2
@@ -31,11 +32,6 @@ class SingleMemory:
     side: int = 0                                     # latched circulation side or 0
     followed_center: tuple[float, float] = (0.0, 0.0)  # m, obstacle being circled
     followed_radius: float = 0.0                      # m
-
-
-def _wrap(a: float) -> float:
-    w = (a + math.pi) % math.tau - math.pi
-    return math.pi if w == -math.pi else w
 
 
 def _argmin(values: Sequence[float]) -> int:
@@ -63,8 +59,8 @@ def _corner_takeover(followed: int, side: int, phi: list[float],
     for k, (cx, cy, r) in enumerate(obstacles):
         gap = math.sqrt((cx - fx) ** 2 + (cy - fy) ** 2) - r - fr
         near = clear[k] < c or (gap < 2.0 * b and clear[k] < 2.0 * c)
-        if k != followed and s * _wrap(phi[k] - theta_f) < 0.0 and near:
-            turn = s * _wrap(phi[k] + s * HALF_PI - theta_f)
+        if k != followed and s * wrap_scalar(phi[k] - theta_f) < 0.0 and near:
+            turn = s * wrap_scalar(phi[k] + s * HALF_PI - theta_f)
             if turn > best_turn:
                 best, best_turn = k, turn
     return best if best_turn > 0.0 else followed
@@ -166,7 +162,7 @@ def single_step(pose: tuple[float, float, float], ref: tuple[float, float],
         mode = Mode.AVOID
         ff = 0.0
 
-    e_theta = 0.0 if dist < EPS else _wrap(theta - theta_d)
+    e_theta = 0.0 if dist < EPS else wrap_scalar(theta - theta_d)
     v = p.K * math.cos(e_theta) * min(p.D_max, dist)
     u = min(max(-p.K_theta * e_theta + ff, -p.u_max), p.u_max)
     return v, u, mode, SingleMemory((ex, ey), avoiding, side, center, radius)

@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from agent.kinematics import (body_velocity, integrate_arc, saturate_wheels, wheel_command,
-                              wheel_commands, wheel_speeds, wrap_angle)
+                              wheel_commands, wheel_speeds, wrap_angle, wrap_scalar)
 
 
 def test_wrap_angle_range():
@@ -79,3 +79,8 @@ def test_one_robots_wheel_command_equals_the_vectorised_one(v, u):
 def test_one_robots_wheel_command_is_not_finite_for_bad_input(v, u):
     """The agent turns such a command into zero velocity; it must not look finite."""
     assert not all(map(math.isfinite, wheel_command(v, u, 0.1, 0.5, 5.0)))
+
+
+@given(st.floats(-1e4, 1e4))
+def test_wrap_scalar_equals_wrap_angle(angle):
+    assert wrap_scalar(angle) == float(wrap_angle(angle))
