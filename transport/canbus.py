@@ -3,18 +3,19 @@
 * ``socketcan`` on ``vcanN``/``canN`` where the kernel has SocketCAN;
 * ``udp_multicast`` where it has none: an interface-local IPv6 group (``ff11::...``, scope 1)
   with ``hop_limit=0``, one UDP port per robot bus (different groups on one port would cross
-  talk). Such traffic never leaves the machine. That bus hears its own frames: they are
-  filtered out here, so it behaves like a CAN controller;
+  talk). Such traffic never leaves the machine. python-can's bus hears its own frames: here
+  the kernel drops them (a socket filter), so it behaves like a CAN controller;
 * ``virtual`` for in-process tests;
 * ``auto``: socketcan when the kernel has it and the channel exists, else udp_multicast.
 """
 from __future__ import annotations
 
+import ctypes
 import ipaddress
 import os
 import socket
+import struct
 import time
-from collections import deque
 
 import can
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
@@ -38,22 +39,49 @@ def has_socketcan(channel: str | None = None) -> bool:
     return channel is None or os.path.exists(f"/sys/class/net/{channel}")
 
 
-class EchoFilteredBus(can.BusABC):
-    """A python-can ``udp_multicast`` bus that drops the echoes of its own frames.
+# classic BPF (linux/filter.h): on a UDP socket the program sees the UDP header at offset 0
+_BPF_LDH_ABS, _BPF_JEQ_K, _BPF_RET_K = 0x28, 0x15, 0x06
+SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
 
-    Such a bus hears every datagram it sends. Echoes arrive in the order the frames were
-    sent; a received datagram equal to the oldest unechoed sent one is taken as its echo and
-    dropped before it is unpacked (the datagrams are compared, so an echo costs no decoding).
-    Entries older than ``horizon`` seconds are forgotten (an echo that never came). Datagrams
-    that are not classic CAN frames are counted in ``malformed`` and skipped.
+
+def drop_from_port(sock: socket.socket, port: int) -> None:
+    """Attach a socket filter that drops, in the kernel, every datagram whose UDP source
+    port is ``port`` (Linux; OSError elsewhere)."""
+    program = [(_BPF_LDH_ABS, 0, 0, 0),               # A = source port
+               (_BPF_JEQ_K, 0, 1, port),              # A == port ? next : skip one
+               (_BPF_RET_K, 0, 0, 0),                 # drop
+               (_BPF_RET_K, 0, 0, 0xFFFFFFFF)]        # keep the whole datagram
+    insns = ctypes.create_string_buffer(b"".join(struct.pack("HBBI", *i) for i in program))
+    sock.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER,
+                    struct.pack("HL", len(program), ctypes.addressof(insns)))   # sock_fprog
+
+
+class EchoFilteredBus(can.BusABC):
+    """A python-can ``udp_multicast`` bus that never hears its own frames, like a CAN
+    controller.
+
+    python-can's bus receives on a socket bound to the group's port and would hear every
+    datagram it sent. This one sends python-can's datagrams from a socket of its own (an
+    ephemeral port, hop limit 0, same group and port), and a socket filter on python-can's
+    receiving socket drops the datagrams from that port in the kernel: an echo never wakes
+    the reader or costs a system call. Every other sender (python-can tools included) is
+    heard. Datagrams that are not classic CAN frames are counted in ``malformed`` and
+    skipped.
     """
 
-    def __init__(self, inner: can.BusABC, horizon: float = 0.5):
+    def __init__(self, inner: can.BusABC):
         self.inner = inner
-        self._socket = inner._multicast     # python-can's datagram socket of this bus
-        self.horizon = horizon
-        self._sent: deque = deque()
-        self.echoes_dropped = 0
+        self._socket = rx = inner._multicast     # python-can's receiving side of this bus
+        self._dest = (rx.group, rx.port)
+        self._tx = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
+        try:
+            self._tx.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, rx.hop_limit)
+            self._tx.bind(("::", 0))
+            self._tx.setblocking(False)         # a full send buffer fails the send, never waits
+            drop_from_port(rx._socket, self._tx.getsockname()[1])
+        except OSError:
+            self._tx.close()
+            raise
         self.malformed = 0
         super().__init__(channel=inner.channel_info)
         self.channel_info = inner.channel_info
@@ -61,9 +89,10 @@ class EchoFilteredBus(can.BusABC):
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         if msg.is_fd:
             raise can.CanOperationError("cannot send an FD frame on a classic CAN bus")
-        data = pack_message(msg)
-        self._socket.send(data, timeout)
-        self._sent.append((time.monotonic(), data))
+        try:
+            self._tx.sendto(pack_message(msg), self._dest)
+        except OSError as exc:
+            raise can.CanOperationError(f"failed to send via socket: {exc}") from exc
 
     def _recv_internal(self, timeout: float | None):
         deadline = None if timeout is None else time.monotonic() + timeout
@@ -73,13 +102,6 @@ class EchoFilteredBus(can.BusABC):
             if not got:
                 return None, False
             data, _, timestamp = got
-            now = time.monotonic()
-            while self._sent and now - self._sent[0][0] > self.horizon:
-                self._sent.popleft()
-            if self._sent and self._sent[0][1] == data:
-                self._sent.popleft()
-                self.echoes_dropped += 1
-                continue
             try:
                 msg = unpack_message(data, replace={"timestamp": timestamp}, check=True)
             except Exception:                  # msgpack or python-can: not a frame of ours
@@ -91,6 +113,7 @@ class EchoFilteredBus(can.BusABC):
 
     def shutdown(self) -> None:
         super().shutdown()
+        self._tx.close()
         self.inner.shutdown()
 
 
@@ -125,4 +148,10 @@ def open_bus(interface: str, channel: str | None = None, port: int | None = None
         bus = can.Bus(interface=interface, channel=channel, **kwargs)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise BusOpenError(f"cannot open CAN bus ({what}): {exc}") from None
-    return EchoFilteredBus(bus) if interface == "udp_multicast" else bus
+    if interface != "udp_multicast":
+        return bus
+    try:
+        return EchoFilteredBus(bus)
+    except OSError as exc:
+        bus.shutdown()
+        raise BusOpenError(f"cannot open CAN bus ({what}): own-frame filter: {exc}") from None
