@@ -75,7 +75,7 @@ class Agent:
         self.mode = AgentMode.DISARMED
         self.failsafe: str | None = None
         self.odometry = Odometry(settings.robot.wheel_radius, settings.robot.wheel_base,
-                                 np.array(settings.initial_pose, dtype=float))
+                                 tuple(settings.initial_pose))
         self.memory = SingleMemory()
         self.counters = AgentCounters()
         self.last_feedback: WheelFeedback | None = None
@@ -131,7 +131,7 @@ class Agent:
         if fb is not None:
             self.odometry.update(*fb.pos_rev)
         self.last_feedback = fb
-        pose = tuple(self.odometry.pose.tolist())
+        pose = self.odometry.pose
         mission = self.swarm.mission()
 
         # update

@@ -9,9 +9,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from agent.kinematics import arc_step
+
+Pose = tuple[float, float, float]
 
 
 @dataclass
@@ -20,16 +20,20 @@ class Odometry:
 
     wheel_radius: float   # m
     wheel_base: float     # m
-    pose: np.ndarray      # (3,), current estimate
+    pose: Pose            # current estimate, plain floats (read every period: no numpy)
     _last: tuple[float, float] | None = None
 
-    def update(self, pos_right_rev: float, pos_left_rev: float) -> np.ndarray:
+    def __post_init__(self) -> None:
+        x, y, theta = self.pose
+        self.pose = (float(x), float(y), float(theta))
+
+    def update(self, pos_right_rev: float, pos_left_rev: float) -> Pose:
         """Advance with new encoder positions [rev]; the first call only sets the origin."""
         if self._last is not None:
             d_right = 2.0 * math.pi * self.wheel_radius * (pos_right_rev - self._last[0])
             d_left = 2.0 * math.pi * self.wheel_radius * (pos_left_rev - self._last[1])
             dist = 0.5 * (d_right + d_left)
             dtheta = (d_right - d_left) / self.wheel_base
-            self.pose = np.array(arc_step(*map(float, self.pose), dist, dtheta))
+            self.pose = arc_step(*self.pose, dist, dtheta)
         self._last = (pos_right_rev, pos_left_rev)
         return self.pose

@@ -38,7 +38,7 @@ class AgentVehicle:
 
     def state(self) -> VehicleState:
         a = self.agent
-        x, y, theta = (float(c) for c in a.odometry.pose)
+        x, y, theta = a.odometry.pose
         return VehicleState(a.mode, a.failsafe, x, y, theta, *a.command)
 
     def arm(self) -> str | None:

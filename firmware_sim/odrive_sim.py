@@ -161,10 +161,19 @@ class DriverPair:
                 setattr(axis, key, value)
 
     # --- CAN side ---------------------------------------------------------------------------
-    def service(self, now: float) -> None:
-        """Handle every frame waiting on the bus, then send what is due at ``now`` [s]."""
+    def fileno(self) -> int | None:
+        """The bus's file descriptor to wait on (None: the bus has none, e.g. virtual)."""
+        try:
+            fd = self.bus.fileno()
+        except NotImplementedError:
+            return None
+        return fd if fd >= 0 else None
+
+    def service(self, now: float, receive: bool = True) -> None:
+        """Handle every frame waiting on the bus (unless ``receive`` is False: the caller
+        knows none is), then send what is due at ``now`` [s]."""
         self._now = now
-        while (msg := self.bus.recv(0.0)) is not None:
+        while receive and (msg := self.bus.recv(0.0)) is not None:
             self._receive(msg)
         for node, axis in self.axes.items():
             due = self._due.get(node)

@@ -18,8 +18,6 @@ import signal
 import time
 from typing import Callable
 
-import numpy as np
-
 from agent.loop import FixedRateLoop, SystemClock, use_realtime
 from firmware_sim.odrive_sim import DriverPair
 from firmware_sim.sitl_plant import PlantRobot, SitlPlant
@@ -85,7 +83,10 @@ class RemoteWheels:
                  stale: float = 0.1):
         self.cache, self.robot_id, self.clock, self.stale = cache, robot_id, clock, stale
 
-    def service(self, now: float) -> None:
+    def fileno(self) -> None:
+        """No bus here: the drivers are remote."""
+
+    def service(self, now: float, receive: bool = True) -> None:
         """Nothing to serve: the drivers are remote."""
 
     def step(self, dt: float) -> None:
@@ -139,7 +140,7 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
     try:
         cache = Latest(session, keys.wheels("*"), WheelsMsg.decode, clock.wall,
                        capacity=64 * len(scenario.ids))
-        robots = [PlantRobot(int(rid), np.array(pose, float),
+        robots = [PlantRobot(int(rid), tuple(map(float, pose)),
                              RemoteWheels(cache, int(rid), clock.wall))
                   for rid, pose in zip(scenario.ids, scenario.poses)]
         stats = _run_plant(session, keys, robots, scenario, dt, clock)
@@ -168,7 +169,7 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
             drivers = DriverPair(bus)
             drivers.configure(vel_limit=r.wheel_speed_limit, ramp=r.wheel_ramp,
                               watchdog=watchdog)
-            robots.append(PlantRobot(rid, np.array(scenario.poses[index[rid]], float), drivers))
+            robots.append(PlantRobot(rid, tuple(map(float, scenario.poses[index[rid]])), drivers))
         stats = _run_plant(session, keys, robots, scenario, dt, clock, realtime_priority)
         stats["cpu_seconds"] = time.process_time()
         stats["wall_seconds"] = time.monotonic() - t0

@@ -11,6 +11,7 @@ steps).
 from __future__ import annotations
 
 import logging
+import select
 from dataclasses import dataclass
 from typing import Callable, Protocol
 
@@ -28,7 +29,9 @@ log = logging.getLogger(__name__)
 class DriverPair(Protocol):
     """The emulated drivers of one robot's two wheels on its bus."""
 
-    def service(self, now: float) -> None: ...          # CAN in/out, periodic frames, watchdog
+    def fileno(self) -> int | None: ...                 # CAN bus descriptor (None: always read)
+    def service(self, now: float, receive: bool = True) -> None: ...
+    # CAN in (unless receive is False: nothing waiting) and out, periodic frames, watchdog
     def step(self, dt: float) -> None: ...              # advance the axes by dt [s]
     def wheel_state(self) -> tuple[float, float, float, float] | None: ...
     # (right, left) positions [rev], then (right, left) actual speeds [rev/s]; None while
@@ -39,7 +42,7 @@ class DriverPair(Protocol):
 @dataclass
 class PlantRobot:
     robot_id: int
-    pose: np.ndarray          # (3,) x [m], y [m], theta [rad]
+    pose: tuple[float, float, float]     # x [m], y [m], theta [rad]
     drivers: DriverPair
     v: float = 0.0            # m/s, actual
     u: float = 0.0            # rad/s, actual
@@ -59,11 +62,21 @@ class SitlPlant:
         self._steps = 0
         self._seq = 0
         self._next_obstacles = -np.inf
+        # one poll for every robot's bus per step, not an empty read of each
+        self._poll = select.poll()
+        self._fds = {}
+        for rb in robots:
+            fd = rb.drivers.fileno()
+            if fd is not None:
+                self._poll.register(fd, select.POLLIN)
+                self._fds[rb.robot_id] = fd
 
     def step(self, dt: float, now_m: float, now_w: float) -> None:
         r = self.params
+        waiting = {fd for fd, _ in self._poll.poll(0)} if self._fds else ()
         for rb in self.robots:
-            rb.drivers.service(now_m)
+            fd = self._fds.get(rb.robot_id)
+            rb.drivers.service(now_m, receive=fd is None or fd in waiting)
             rb.drivers.step(dt)
             state = rb.drivers.wheel_state()
             if state is None:
@@ -72,14 +85,14 @@ class SitlPlant:
             v, u = body_velocity(TWO_PI * right, TWO_PI * left, r.wheel_radius, r.wheel_base)
             rb.v, rb.u = float(v), float(u)
             if rb.wheels is None:       # the robot rolls exactly as its wheels turned
-                rb.wheels = Odometry(r.wheel_radius, r.wheel_base, rb.pose.copy())
-            rb.pose = rb.wheels.update(right_pos, left_pos).copy()
+                rb.wheels = Odometry(r.wheel_radius, r.wheel_base, rb.pose)
+            rb.pose = rb.wheels.update(right_pos, left_pos)
         self._steps += 1
         if self._steps % self.truth_every == 0:
             self._seq += 1
             for rb in self.robots:
                 self.publish("truth", rb.robot_id,
-                             TruthMsg(rb.robot_id, self._seq, now_w, *map(float, rb.pose),
+                             TruthMsg(rb.robot_id, self._seq, now_w, *rb.pose,
                                       rb.v, rb.u).encode())
         if now_m >= self._next_obstacles:
             self._next_obstacles = now_m + self.obstacles_period

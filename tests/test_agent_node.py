@@ -37,7 +37,7 @@ def test_a_single_agent_reaches_its_place():
     agent.arm()
     assert agent.set_mode(AgentMode.FORMATION) is None
     run(clock, [agent], 6.0)
-    assert np.hypot(*(agent.odometry.pose[:2] - [6.0, 3.0])) < 0.05
+    assert np.hypot(*(np.subtract(agent.odometry.pose[:2], [6.0, 3.0]))) < 0.05
     last = agent.swarm.published[-1]
     assert last.flags == StateFlags.ARMED and last.x_d == pytest.approx(6.0)
 
@@ -53,7 +53,7 @@ def test_agents_swap_through_each_other_without_collision():
         for a in agents:
             a.tick()
         clock.now += 0.02
-        dmin = min(dmin, np.hypot(*(agents[0].odometry.pose[:2] - agents[1].odometry.pose[:2])))
+        dmin = min(dmin, np.hypot(*(np.subtract(agents[0].odometry.pose[:2], agents[1].odometry.pose[:2]))))
     assert dmin > 1.0
     assert agents[0].odometry.pose[0] > 5.0 and agents[1].odometry.pose[0] < -5.0
     modes = {m.mode for m in agents[0].swarm.published}
@@ -109,13 +109,13 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     clock.now += 1.0                           # older than the 0.5 s staleness
     a.arm()
     a.set_mode(AgentMode.FORMATION)
-    nbr, obstacles = a._surroundings(tuple(a.odometry.pose), clock.wall())
+    nbr, obstacles = a._surroundings(a.odometry.pose, clock.wall())
     assert nbr == [] and obstacles == [(4.0, 0.0, 0.5)]
     dmin = np.inf
     for _ in range(400):
         a.tick()
         clock.now += 0.02
-        dmin = min(dmin, np.hypot(*(a.odometry.pose[:2] - [4.0, 0.0])))
+        dmin = min(dmin, np.hypot(*(np.subtract(a.odometry.pose[:2], [4.0, 0.0]))))
     assert dmin > 1.0                          # went around it
     assert a.odometry.pose[0] > 8.0
 
@@ -130,7 +130,7 @@ def test_obstacles_from_the_swarm_port_are_used():
     for _ in range(500):
         agent.tick()
         clock.now += 0.02
-        clear = min(clear, np.hypot(*(agent.odometry.pose[:2] - [8.0, 0.0])) - 2.0)
+        clear = min(clear, np.hypot(*(np.subtract(agent.odometry.pose[:2], [8.0, 0.0]))) - 2.0)
     assert clear > 1.0 and agent.odometry.pose[0] > 14.0
     assert Mode.ROTATE in {m.mode for m in agent.swarm.published}
 

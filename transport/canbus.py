@@ -111,6 +111,10 @@ class EchoFilteredBus(can.BusABC):
                 continue
             return msg, False
 
+    def fileno(self) -> int:
+        """The receiving socket's descriptor (readable when a frame waits)."""
+        return self.inner.fileno()
+
     def shutdown(self) -> None:
         super().shutdown()
         self._tx.close()
