@@ -22,6 +22,7 @@ import logging
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Mapping
 
 import numpy as np
 
@@ -34,7 +35,7 @@ from agent.neighbours import in_range
 from agent.odometry import Odometry
 from agent.ports import MotorPort, SwarmPort, WheelFeedback
 from agent.settings import AgentSettings
-from transport.payloads import MissionMsg, StateFlags, StateMsg
+from transport.payloads import MissionMsg, ObstaclesMsg, Received, StateFlags, StateMsg
 
 log = logging.getLogger(__name__)
 
@@ -133,6 +134,10 @@ class Agent:
         self.last_feedback = fb
         pose = self.odometry.pose
         mission = self.swarm.mission()
+        # every period whatever the mode: the same work each tick (nothing piles up in the
+        # rings until the mission starts, when every agent would drain them at once)
+        neighbours = self.swarm.neighbours()
+        detections = self.swarm.obstacles()
 
         # update
         v = u = 0.0
@@ -140,7 +145,8 @@ class Agent:
         if self.mode is not AgentMode.DISARMED:
             self._check_feedback(fb, now_m)
             if self.mode is AgentMode.FORMATION and self.failsafe is None and not self._arming:
-                v, u = self._formation_step(pose, mission, now_m, now_w)
+                v, u = self._formation_step(pose, mission, neighbours, detections, now_m,
+                                            now_w)
         else:
             self._last_law = None
 
@@ -206,7 +212,9 @@ class Agent:
         return self._formation
 
     def _formation_step(self, pose: tuple[float, float, float], mission: MissionMsg | None,
-                        now_m: float, now_w: float) -> tuple[float, float]:
+                        neighbours: Mapping[int, Received[StateMsg]],
+                        detections: ObstaclesMsg | None, now_m: float, now_w: float
+                        ) -> tuple[float, float]:
         if mission is None or now_w < mission.epoch:
             self._last_law = None
             return 0.0, 0.0
@@ -214,7 +222,7 @@ class Agent:
         if formation is None:
             return 0.0, 0.0
         self.reference = formation.point(0, now_w - mission.epoch)
-        nbrs, obstacles = self._surroundings(pose, now_w)
+        nbrs, obstacles = self._surroundings(pose, neighbours, detections, now_w)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
         v, u, self.law_mode, self.memory = single_step(
@@ -222,15 +230,17 @@ class Agent:
             dt=max(dt, 1e-6))
         return v, u
 
-    def _surroundings(self, pose: tuple[float, float, float], now_w: float
+    def _surroundings(self, pose: tuple[float, float, float],
+                      neighbours: Mapping[int, Received[StateMsg]],
+                      obs: ObstaclesMsg | None, now_w: float
                       ) -> tuple[list[tuple[float, float]], list[tuple[float, float, float]]]:
-        """Neighbours in range [m] (extrapolated to now) and obstacles (x, y, radius) [m],
-        stale robots included as static obstacles of radius a/2 at their last position."""
+        """Neighbours in range [m] (extrapolated to now) and obstacles (x, y, radius) [m]
+        (the detections ``obs``), stale robots included as static obstacles of radius a/2 at
+        their last position."""
         me = self.s.robot_id
-        near = in_range((r.msg for rid, r in self.swarm.neighbours().items() if rid != me),
+        near = in_range((r.msg for rid, r in neighbours.items() if rid != me),
                         pose[0], pose[1], now_w, self.s.staleness, self.s.sensing_range)
         self.counters.neighbour_age.extend(near.ages)
-        obs = self.swarm.obstacles()
         obstacles = ([(x, y, r) for (x, y), r in zip(obs.centers.tolist(), obs.radii.tolist())]
                      if obs is not None else [])
         obstacles += [(x, y, self.s.control.a / 2) for x, y in near.stale]

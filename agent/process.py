@@ -65,6 +65,12 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
     s = settings
     clock = SystemClock()
     t0 = time.monotonic()
+    if s.realtime_priority > 0:
+        # Zenoh's threads, started with the session below, inherit this: one step under the
+        # loop. Never starved by normally scheduled work, they never hold up the loop on the
+        # locks it shares with them (the receive rings); never above it, a burst of samples
+        # never delays a period
+        use_realtime(max(s.realtime_priority - 1, 1))
     bus = open_bus(s.can.interface, s.can.channel, port=s.can.port, bitrate=s.can.bitrate)
     session = swarm = link = None
     try:

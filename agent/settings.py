@@ -6,7 +6,8 @@
     swarm = "paper"                 # Zenoh key prefix boundswarm/<swarm>
     initial_pose = [x, y, theta]    # m, m, rad: where odometry starts
     autostart = true                # arm and follow the mission without a ground station
-    realtime_priority = 0           # 1..99: the loop thread runs SCHED_FIFO at it (0: normal)
+    realtime_priority = 0           # 1..99: the loop thread runs SCHED_FIFO at it, Zenoh's
+                                    # threads one below (0: normal scheduling)
     [control]                       # agent.config.ControlParams (period = loop period)
     [robot]                         # agent.config.RobotParams (wheels, driver limits)
     [can]                           # python-can terms: interface, channel, port (udp_multicast),
@@ -123,7 +124,8 @@ class AgentSettings:
     staleness: float = 0.5            # s, neighbour kept as a static obstacle beyond this
     sensing_range: float = 8.0        # m
     mavlink: MavlinkSettings = field(default_factory=MavlinkSettings)
-    realtime_priority: int = 0        # SCHED_FIFO priority of the loop thread (0: normal)
+    realtime_priority: int = 0        # SCHED_FIFO priority of the loop thread, Zenoh's one
+                                      # below (0: normal)
 
 
 def near_radius_problem(near_radius: float, sensing_range: float) -> str | None:

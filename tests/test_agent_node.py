@@ -109,7 +109,8 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     clock.now += 1.0                           # older than the 0.5 s staleness
     a.arm()
     a.set_mode(AgentMode.FORMATION)
-    nbr, obstacles = a._surroundings(a.odometry.pose, clock.wall())
+    nbr, obstacles = a._surroundings(a.odometry.pose, a.swarm.neighbours(), a.swarm.obstacles(),
+                                     clock.wall())
     assert nbr == [] and obstacles == [(4.0, 0.0, 0.5)]
     dmin = np.inf
     for _ in range(400):
@@ -164,3 +165,26 @@ def test_drivers_that_never_arm_are_a_failsafe():
     agent.set_mode(AgentMode.FORMATION)
     run(clock, [agent], 5.5)
     assert agent.failsafe == "drivers not armed within 5 s (no feedback)"
+
+
+def test_every_period_reads_the_same_ports_whatever_the_mode():
+    """Neighbours and detections are read every tick, disarmed and before the epoch too:
+    samples never pile up until the mission starts (when every agent would drain its
+    backlog in the same period)."""
+    clock, net, (a, b) = make_swarm([(0.0, 0.0, 0.0), (4.0, 0.0, 0.0)],
+                                    [(0.0, 0.0), (0.0, 4.0)], epoch_in=1.0)
+    reads = []
+    for name in ("neighbours", "obstacles", "mission"):
+        def counted(f=getattr(a.swarm, name), name=name):
+            reads.append(name)
+            return f()
+        setattr(a.swarm, name, counted)
+    a.tick()                                   # disarmed
+    a.arm()
+    a.set_mode(AgentMode.FORMATION)
+    clock.now += 0.02
+    a.tick()                                   # formation, before the epoch
+    clock.now += 1.0
+    b.tick()
+    a.tick()                                   # formation, mission running
+    assert reads == ["mission", "neighbours", "obstacles"] * 3

@@ -1,3 +1,8 @@
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
 from agent.config import ConfigError
@@ -47,9 +52,8 @@ def test_missing_required_fields():
             parse_settings(doc, "robot.toml")
 
 
-@pytest.mark.skipif(__import__("os").geteuid() != 0, reason="SCHED_FIFO needs root here")
+@pytest.mark.skipif(os.geteuid() != 0, reason="SCHED_FIFO needs root here")
 def test_realtime_priority_applies_to_the_calling_thread_only():
-    import os
     import threading
 
     from agent.loop import use_realtime
@@ -64,3 +68,28 @@ def test_realtime_priority_applies_to_the_calling_thread_only():
     t.join()
     assert got == {"granted": True, "policy": os.SCHED_FIFO}
     assert os.sched_getscheduler(0) == os.SCHED_OTHER      # this thread untouched
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="SCHED_FIFO needs root here")
+def test_zenoh_threads_inherit_the_scheduling_of_the_thread_that_opens_the_session():
+    """The agent relies on it to run Zenoh's threads one step under its loop."""
+    code = """if True:
+        import os
+        from agent.loop import use_realtime
+        from transport.zenoh_link import open_session, session_config
+        assert use_realtime(4)
+        session = open_session(session_config("peer"), "test")
+        policies = {}
+        for tid in os.listdir("/proc/self/task"):
+            name = open(f"/proc/self/task/{tid}/comm").read().strip()
+            if name.startswith(("rx-", "tx-", "app-", "net-", "acc-")):
+                policies[name] = (os.sched_getscheduler(int(tid)),
+                                  os.sched_getparam(int(tid)).sched_priority)
+        session.close()
+        print(sorted(set(policies.values())), len(policies))
+    """
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60, cwd=Path(__file__).resolve().parent.parent)
+    assert out.returncode == 0, out.stderr
+    policies, count = out.stdout.strip().rsplit(" ", 1)
+    assert int(count) >= 1 and policies == f"[({os.SCHED_FIFO}, 4)]", out.stdout
