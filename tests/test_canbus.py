@@ -128,3 +128,25 @@ def test_a_stray_datagram_on_the_bus_port_is_skipped_not_fatal():
     finally:
         bus.shutdown()
         peer.shutdown()
+
+
+def test_a_send_port_that_is_another_bus_port_neither_blocks_nor_steals_from_it():
+    """A bus sends from an ephemeral port, drawn from the range robot buses' ports come
+    from: a bus opened later on that port opens and hears all of its peers' frames."""
+    opened = [open_bus("udp_multicast", "ff11::b5:6", port=free_udp_port())]
+    try:
+        x = opened[0]
+        port = x._tx.getsockname()[1]
+        opened.append(y := open_bus("udp_multicast", "ff11::b5:6", port=port))
+        opened.append(peer := open_bus("udp_multicast", "ff11::b5:6", port=port))
+        for i in range(100):
+            peer.send(can.Message(arbitration_id=i, data=bytes(8), is_extended_id=False))
+        got = []
+        while len(got) < 100 and (msg := y.recv(2.0)) is not None:
+            got.append(msg.arbitration_id)
+        assert got == list(range(100))
+        x.send(can.Message(arbitration_id=0x02D, data=bytes(8), is_extended_id=False))
+        assert y.recv(0.3) is None                  # another bus: not heard there
+    finally:
+        for bus in opened:
+            bus.shutdown()

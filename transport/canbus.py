@@ -44,16 +44,22 @@ _BPF_LDH_ABS, _BPF_JEQ_K, _BPF_RET_K = 0x28, 0x15, 0x06
 SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
 
 
-def drop_from_port(sock: socket.socket, port: int) -> None:
-    """Attach a socket filter that drops, in the kernel, every datagram whose UDP source
-    port is ``port`` (Linux; OSError elsewhere)."""
-    program = [(_BPF_LDH_ABS, 0, 0, 0),               # A = source port
-               (_BPF_JEQ_K, 0, 1, port),              # A == port ? next : skip one
-               (_BPF_RET_K, 0, 0, 0),                 # drop
-               (_BPF_RET_K, 0, 0, 0xFFFFFFFF)]        # keep the whole datagram
+_DROP_ALL = [(_BPF_RET_K, 0, 0, 0)]
+
+
+def _attach(sock: socket.socket, program: list[tuple[int, int, int, int]]) -> None:
+    """Attach a classic BPF socket filter (Linux; OSError elsewhere)."""
     insns = ctypes.create_string_buffer(b"".join(struct.pack("HBBI", *i) for i in program))
     sock.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER,
                     struct.pack("HL", len(program), ctypes.addressof(insns)))   # sock_fprog
+
+
+def drop_from_port(sock: socket.socket, port: int) -> None:
+    """Drop, in the kernel, every datagram to ``sock`` whose UDP source port is ``port``."""
+    _attach(sock, [(_BPF_LDH_ABS, 0, 0, 0),           # A = source port
+                   (_BPF_JEQ_K, 0, 1, port),          # A == port ? next : skip one
+                   (_BPF_RET_K, 0, 0, 0),             # drop
+                   (_BPF_RET_K, 0, 0, 0xFFFFFFFF)])   # keep the whole datagram
 
 
 class EchoFilteredBus(can.BusABC):
@@ -73,12 +79,19 @@ class EchoFilteredBus(can.BusABC):
         self.inner = inner
         self._socket = rx = inner._multicast     # python-can's receiving side of this bus
         self._dest = (rx.group, rx.port)
-        self._tx = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
+        self._tx = tx = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
         try:
-            self._tx.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, rx.hop_limit)
-            self._tx.bind(("::", 0))
-            self._tx.setblocking(False)         # a full send buffer fails the send, never waits
-            drop_from_port(rx._socket, self._tx.getsockname()[1])
+            tx.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, rx.hop_limit)
+            # python-can binds its buses' ports with these: an ephemeral port that happens to
+            # be another bus's (ports are picked from the same range) must not keep that bus
+            # from opening. What such a shared port would queue here is dropped: it only sends
+            for option in (socket.SO_REUSEADDR, getattr(socket, "SO_REUSEPORT", None)):
+                if option is not None:
+                    tx.setsockopt(socket.SOL_SOCKET, option, 1)
+            _attach(tx, _DROP_ALL)
+            tx.bind(("::", 0))
+            tx.setblocking(False)               # a full send buffer fails the send, never waits
+            drop_from_port(rx._socket, tx.getsockname()[1])
         except OSError:
             self._tx.close()
             raise
