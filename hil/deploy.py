@@ -155,7 +155,7 @@ Wants=network-online.target
 Type=notify
 NotifyAccess=main
 User=boundswarm
-# the control loop thread runs SCHED_FIFO (agent.toml realtime_priority)
+# the control loop thread runs SCHED_FIFO (agent.toml realtime_priority), Zenoh's one below
 LimitRTPRIO={rtprio}
 WorkingDirectory={etc}
 ExecStartPre=+/usr/sbin/ip link set {can} down
