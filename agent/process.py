@@ -65,12 +65,12 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
     s = settings
     clock = SystemClock()
     t0 = time.monotonic()
-    if s.realtime_priority > 0:
-        # Zenoh's threads, started with the session below, inherit this: one step under the
-        # loop. Never starved by normally scheduled work, they never hold up the loop on the
-        # locks it shares with them (the receive rings); never above it, a burst of samples
-        # never delays a period
-        use_realtime(max(s.realtime_priority - 1, 1))
+    # Zenoh's threads, started with the session below, inherit this: one step under the
+    # loop. Never starved by normally scheduled work, they never hold up the loop on the
+    # locks it shares with them (the receive rings); never above it, a burst of samples
+    # never delays a period. Not granted (one warning): everything runs normally
+    rt = (s.realtime_priority if s.realtime_priority > 0
+          and use_realtime(max(s.realtime_priority - 1, 1)) else 0)
     bus = open_bus(s.can.interface, s.can.channel, port=s.can.port, bitrate=s.can.bitrate)
     session = swarm = link = None
     try:
@@ -79,7 +79,6 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         conf = (config_from_file(s.zenoh.config) if s.zenoh.config else
                 session_config(s.zenoh.mode, s.zenoh.listen, s.zenoh.connect))
         session = open_session(conf, f"agent {s.robot_id}")
-        rt = s.realtime_priority
         swarm = SwarmLink(session, Keys(s.swarm), s.robot_id, clock.wall,
                           near_radius=s.zenoh.near_radius,
                           # the near-set thread takes the interpreter lock the loop needs:
@@ -88,7 +87,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         agent = Agent(s, motor, swarm, clock)
         link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
                          clock.wall)
-        realtime = s.realtime_priority > 0 and use_realtime(s.realtime_priority)
+        realtime = rt > 0 and use_realtime(rt)
         loop = FixedRateLoop(s.control.period, clock)
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: loop.stop())
