@@ -101,5 +101,5 @@ def wheel_command(v: float, u: float, wheel_radius: float, wheel_base: float,
     wr, wl = (v + half) / wheel_radius, (v - half) / wheel_radius
     limit = TWO_PI * speed_limit_rev_s
     peak = max(abs(wr), abs(wl))
-    scale = limit / max(peak, 1e-300) if peak > limit else 1.0
+    scale = limit / peak if peak > limit else 1.0
     return wr * scale / TWO_PI, wl * scale / TWO_PI

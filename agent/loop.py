@@ -125,9 +125,9 @@ class FixedRateLoop:
 
 def use_realtime(priority: int) -> bool:
     """Put the calling thread (the loop's, or a helper it waits on) under SCHED_FIFO at
-    ``priority`` (1..99); other threads, e.g. Zenoh's, keep normal scheduling. Without the
-    right (root, CAP_SYS_NICE or RLIMIT_RTPRIO) it runs on with normal scheduling and a
-    warning."""
+    ``priority`` (1..99); threads it starts afterwards inherit it (the agent's Zenoh threads
+    do), others keep theirs. Without the right (root, CAP_SYS_NICE or RLIMIT_RTPRIO) it runs
+    on with normal scheduling and a warning."""
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except OSError as exc:                      # PermissionError: not allowed

@@ -50,13 +50,14 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
     out = InRange()
     for m in states:
         age = now - m.stamp
-        if age > staleness:
+        stale = age > staleness
+        if stale:
             px, py = m.x, m.y
         else:
             dt = max(age, 0.0)
             px, py, _ = arc_step(m.x, m.y, m.theta, m.v * dt, m.u * dt)
         if math.hypot(px - x, py - y) <= reach:
-            if age > staleness:
+            if stale:
                 out.stale.append((px, py))
             else:
                 out.fresh.append((px, py))

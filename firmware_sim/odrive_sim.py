@@ -18,9 +18,9 @@ and Get_Encoder_Estimates (10 ms) out, remote requests answered; malformed frame
 and counted. Fault injection: silence a node, drop or delay a fraction of the frames it
 sends (seeded RNG), raise an error bit.
 
-The two frames of the steady flow (Get_Encoder_Estimates out, Set_Input_Vel in) are packed
-and unpacked directly with their DBC-checked structs from :mod:`transport.odrive_frames`;
-every other frame goes through its :func:`encode` and :func:`decode`.
+Frames in go through :func:`transport.odrive_frames.decode`; frames out through its
+:func:`encode`, except the encoder estimates (the steady flow out), packed directly with their
+DBC-checked struct.
 """
 from __future__ import annotations
 
@@ -34,9 +34,9 @@ from functools import lru_cache
 
 import can
 
-from transport.odrive_frames import (ENCODER_ESTIMATES, INPUT_VEL, AxisError, AxisState, Cmd,
-                                     ControlMode, Frame, FrameError, InputMode, arbitration_id,
-                                     decode, encode)
+from transport.odrive_frames import (ENCODER_ESTIMATES, AxisError, AxisState, Cmd, ControlMode,
+                                     Frame, FrameError, InputMode, arbitration_id, decode,
+                                     encode)
 
 log = logging.getLogger(__name__)
 
@@ -190,16 +190,7 @@ class DriverPair:
             self._send(msg)
 
     def _receive(self, msg: can.Message) -> None:
-        """Handle one received frame: a well-formed Set_Input_Vel for one of our axes on the
-        fast path, any other through :func:`decode` (frames to ignore counted)."""
-        node, cmd = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
-        axis = self.axes.get(node) if cmd == Cmd.SET_INPUT_VEL else None
-        if (axis is not None and len(msg.data) == INPUT_VEL.size
-                and not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame)):
-            vel, torque = INPUT_VEL.unpack(msg.data)
-            if math.isfinite(vel) and math.isfinite(torque):
-                axis.input_vel(vel)
-                return
+        """Handle one received frame (frames to ignore counted)."""
         try:
             frame = decode(msg)
         except FrameError as exc:

@@ -30,7 +30,6 @@ def sessions():
             s.close()
 
 
-
 def state(rid, seq, stamp):
     return StateMsg(rid, seq, stamp, 1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, StateFlags(0))
 
