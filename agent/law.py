@@ -24,7 +24,6 @@ step the same; the tests run both).
 """
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,12 +32,7 @@ from agent.avoidance import (EPS, corner_takeover, potential_gradient, remove_to
                              segment_distance, tangent_side)
 from agent.config import ControlParams
 from agent.kinematics import wrap_angle
-
-
-class Mode(enum.IntEnum):
-    TRACK = 0
-    AVOID = 1
-    ROTATE = 2
+from common.vocabulary import Mode
 
 
 @dataclass(frozen=True)

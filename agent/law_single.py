@@ -18,7 +18,7 @@ from typing import Sequence
 from agent.avoidance import EPS
 from agent.config import ControlParams
 from agent.kinematics import wrap_scalar
-from agent.law import Mode
+from common.vocabulary import Mode
 
 HALF_PI = math.pi / 2
 

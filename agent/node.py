@@ -28,7 +28,7 @@ import numpy as np
 
 from agent.formation import Formation
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
-from agent.law import Mode
+from common.vocabulary import Mode
 from agent.law_single import SingleMemory, single_step
 from agent.loop import Clock
 from agent.neighbours import in_range

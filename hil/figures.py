@@ -13,7 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (backend chosen first)
 import numpy as np  # noqa: E402
 
-from agent.law import Mode  # noqa: E402
+from common.vocabulary import Mode  # noqa: E402
 from firmware_sim.world import Obstacles  # noqa: E402
 from hil.run_folder import RunData  # noqa: E402
 

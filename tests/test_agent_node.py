@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from agent.config import ControlParams
-from agent.law import Mode
+from common.vocabulary import Mode
 from agent.loop import FixedRateLoop
 from agent.node import Agent, AgentMode
 from agent.settings import AgentSettings

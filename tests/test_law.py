@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from agent.config import ControlParams
-from agent.law import LawMemory, Mode
+from agent.law import LawMemory
+from common.vocabulary import Mode
 import lawcase
 from lawcase import single, step
 

@@ -12,7 +12,7 @@ Every payload is little-endian and starts with the same 16-byte header::
 followed by the body of its kind:
 
 * STATE (key ``.../robot/<id>/state``, 36-byte body, 52 bytes in all):
-  x, y, theta, v, u, x_d, y_d as f32 [m, m, rad, m/s, rad/s, m, m], mode u8 (agent.law.Mode),
+  x, y, theta, v, u, x_d, y_d as f32 [m, m, rad, m/s, rad/s, m, m], mode u8 (common.vocabulary.Mode),
   flags u8 (StateFlags), 6 reserved zero bytes.
 * OBSTACLES (``.../robot/<id>/obstacles``): count u16, then count x (cx, cy, r) f32 [m].
 * TRUTH (``.../robot/<id>/truth``, SITL only): x, y, theta, v, u as f64.
