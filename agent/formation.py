@@ -51,6 +51,21 @@ def formation_offsets(kind: FormationKind, n: int, spacing: float) -> np.ndarray
     return off - off.mean(axis=0)
 
 
+def reference_point(offset_x: float, offset_y: float, center_x: float, center_y: float,
+                    vel_x: float, vel_y: float, omega: float, t: float
+                    ) -> tuple[float, float, float, float]:
+    """(x, y, x_dot, y_dot): one robot's reference p_d(t) [m] and its velocity [m/s].
+
+    p_d(t) = center0 + velocity t + Rot(omega t) offset. Plain floats: agents run it
+    interpreted, the batch simulator compiled (:mod:`firmware_sim.compiled`).
+    """
+    c, s = math.cos(omega * t), math.sin(omega * t)
+    rx, ry = offset_x * c - offset_y * s, offset_x * s + offset_y * c
+    # d/dt Rot(wt) off = w J Rot(wt) off, J = [[0,-1],[1,0]]
+    return (center_x + vel_x * t + rx, center_y + vel_y * t + ry,
+            vel_x - omega * ry, vel_y + omega * rx)
+
+
 @dataclass(frozen=True)
 class Formation:
     """A rigid formation moving with constant velocity [m/s] and turn rate omega [rad/s]."""
@@ -60,26 +75,16 @@ class Formation:
     velocity: tuple[float, float] = (0.0, 0.0)
     omega: float = 0.0
 
-    def reference(self, t: float, idx: np.ndarray | slice = slice(None)
-                  ) -> tuple[np.ndarray, np.ndarray]:
-        """(p_d, p_d_dot): reference positions [m] and velocities [m/s] at time t [s]."""
-        off = self.offsets[idx]
-        c, s = math.cos(self.omega * t), math.sin(self.omega * t)
-        rot = np.array([[c, -s], [s, c]])
-        r_off = off @ rot.T
-        p = np.asarray(self.center0) + np.asarray(self.velocity) * t + r_off
-        # d/dt Rot(wt) off = w J Rot(wt) off, J = [[0,-1],[1,0]]
-        pdot = np.asarray(self.velocity) + self.omega * np.column_stack([-r_off[:, 1],
-                                                                          r_off[:, 0]])
-        return p, pdot
-
-    def point(self, i: int, t: float) -> tuple[float, float]:
-        """:meth:`reference` position [m] of robot ``i`` at time t [s] in plain floats (an
-        agent's own reference, every period)."""
+    def point(self, i: int, t: float) -> tuple[float, float, float, float]:
+        """:func:`reference_point` of robot ``i`` at time t [s]."""
         ox, oy = self.offsets[i].tolist()
-        c, s = math.cos(self.omega * t), math.sin(self.omega * t)
-        return (self.center0[0] + self.velocity[0] * t + (ox * c - oy * s),
-                self.center0[1] + self.velocity[1] * t + (ox * s + oy * c))
+        return reference_point(ox, oy, self.center0[0], self.center0[1], self.velocity[0],
+                               self.velocity[1], self.omega, t)
+
+    def reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(p_d, p_d_dot): every robot's reference [m] and velocity [m/s] at t, (N, 2) each."""
+        out = np.array([self.point(i, t) for i in range(len(self.offsets))]).reshape(-1, 4)
+        return out[:, :2], out[:, 2:]
 
     def min_spacing(self) -> float:
         """Smallest distance [m] between two reference positions (inf for one robot)."""

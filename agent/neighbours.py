@@ -8,7 +8,7 @@ known position (no extrapolation).
 
 One agent sees a few dozen states per period, so this runs in plain floats (numpy's cost
 per call would dominate); the arc is :func:`agent.kinematics.arc_step`, the same exact arc
-the swarm simulation integrates.
+the simulators integrate.
 """
 from __future__ import annotations
 
@@ -32,10 +32,12 @@ class NeighbourState(Protocol):
 
 @dataclass
 class InRange:
-    """Neighbours within range of a robot: positions [m] at ``now``."""
+    """Neighbours within range of a robot: positions [m] at ``now``, as the law takes them."""
 
-    fresh: list[tuple[float, float]] = field(default_factory=list)  # extrapolated to now
-    stale: list[tuple[float, float]] = field(default_factory=list)  # at their last position
+    fresh_x: list[float] = field(default_factory=list)  # extrapolated to now
+    fresh_y: list[float] = field(default_factory=list)
+    stale_x: list[float] = field(default_factory=list)  # at their last position
+    stale_y: list[float] = field(default_factory=list)
     ages: list[float] = field(default_factory=list)  # s, now - stamp of each fresh one
 
 
@@ -58,8 +60,10 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
             px, py, _ = arc_step(m.x, m.y, m.theta, m.v * dt, m.u * dt)
         if math.hypot(px - x, py - y) <= reach:
             if stale:
-                out.stale.append((px, py))
+                out.stale_x.append(px)
+                out.stale_y.append(py)
             else:
-                out.fresh.append((px, py))
+                out.fresh_x.append(px)
+                out.fresh_y.append(py)
                 out.ages.append(age)
     return out

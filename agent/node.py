@@ -4,9 +4,9 @@ Theory of operation. Every tick the agent
 
 1. reads: drains the wheel drivers' feedback (odometry from the encoder positions), takes
    an immutable snapshot of its neighbours' states, its obstacle detections and the mission;
-2. updates: decides its mode and runs the pure law for itself (agent.law_single, the law for
-   one robot in floats) with its neighbours extrapolated to now (stale ones kept as static
-   obstacles at their last position);
+2. updates: decides its mode and runs the one pure law for itself (agent.law) with its
+   neighbours extrapolated to now (stale ones kept as static obstacles at their last
+   position);
 3. writes: the wheel velocities (curvature-preserving saturation) and its own state.
 
 Modes: DISARMED (drivers IDLE, nothing commanded), HOLD (zero velocity, watchdog fed) and
@@ -29,9 +29,9 @@ import numpy as np
 from agent.formation import Formation
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
 from common.vocabulary import Mode
-from agent.law_single import SingleMemory, single_step
+from agent.law import LawMemory, LawParams, law_step
 from agent.loop import Clock
-from agent.neighbours import in_range
+from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry
 from agent.ports import MotorPort, SwarmPort, WheelFeedback
 from agent.settings import AgentSettings
@@ -77,7 +77,7 @@ class Agent:
         self.failsafe: str | None = None
         self.odometry = Odometry(settings.robot.wheel_radius, settings.robot.wheel_base,
                                  tuple(settings.initial_pose))
-        self.memory = SingleMemory()
+        self.memory = LawMemory()
         self.counters = AgentCounters()
         self.last_feedback: WheelFeedback | None = None
         self.command = (0.0, 0.0)          # (v [m/s], u [rad/s]) after saturation
@@ -221,30 +221,33 @@ class Agent:
         formation = self._formation_place(mission)
         if formation is None:
             return 0.0, 0.0
-        self.reference = formation.point(0, now_w - mission.epoch)
-        nbrs, obstacles = self._surroundings(pose, neighbours, detections, now_w)
+        self.reference = formation.point(0, now_w - mission.epoch)[:2]
+        near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
-        v, u, self.law_mode, self.memory = single_step(
-            pose, self.reference, nbrs, obstacles, self.memory, self.s.control,
-            dt=max(dt, 1e-6))
+        v, u, mode, self.memory = law_step(
+            *pose, *self.reference, near.fresh_x, near.fresh_y, obs_x, obs_y, obs_r,
+            self.memory, LawParams.of(self.s.control), max(dt, 1e-6))
+        self.law_mode = Mode(mode)
         return v, u
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],
                       obs: ObstaclesMsg | None, now_w: float
-                      ) -> tuple[list[tuple[float, float]], list[tuple[float, float, float]]]:
-        """Neighbours in range [m] (extrapolated to now) and obstacles (x, y, radius) [m]
-        (the detections ``obs``), stale robots included as static obstacles of radius a/2 at
-        their last position."""
+                      ) -> tuple[InRange, list[float], list[float], list[float]]:
+        """Neighbours in range [m] (extrapolated to now) and obstacles' centres and radii
+        [m] (the detections ``obs``), stale robots included as static obstacles of radius
+        a/2 at their last position."""
         me = self.s.robot_id
         near = in_range((r.msg for rid, r in neighbours.items() if rid != me),
                         pose[0], pose[1], now_w, self.s.staleness, self.s.sensing_range)
         self.counters.neighbour_age.extend(near.ages)
-        obstacles = ([(x, y, r) for (x, y), r in zip(obs.centers.tolist(), obs.radii.tolist())]
-                     if obs is not None else [])
-        obstacles += [(x, y, self.s.control.a / 2) for x, y in near.stale]
-        return near.fresh, obstacles
+        obs_x, obs_y, obs_r = ((obs.centers[:, 0].tolist(), obs.centers[:, 1].tolist(),
+                                obs.radii.tolist()) if obs is not None else ([], [], []))
+        obs_x += near.stale_x
+        obs_y += near.stale_y
+        obs_r += [self.s.control.a / 2] * len(near.stale_x)
+        return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:
         f = StateFlags(0)

@@ -1,4 +1,4 @@
-"""Cost of one robot's law step: agent.law (vectorised, N = 1) against agent.law_single.
+"""Cost of one robot's law step as an agent runs it (agent.law, interpreted).
 
 Median over repeated steps of a robot that sees three neighbours and an obstacle, run back
 to back (hot caches) and after sweeping 16 MB of memory between steps (cold caches, as on a
@@ -14,25 +14,17 @@ import time
 import numpy as np
 
 from agent.config import ControlParams
-from agent.law import LawInput, LawMemory, control_step
-from agent.law_single import SingleMemory, single_step
+from agent.law import LawMemory, LawParams, law_step
 
 POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0)
-NBRS, OBSTACLES = [(2.0, 1.0), (3.0, -2.0), (-1.0, 4.0)], [(6.0, 0.0, 1.0)]
+NBR_X, NBR_Y = [2.0, 3.0, -1.0], [1.0, -2.0, 4.0]
+OBS_X, OBS_Y, OBS_R = [6.0], [0.0], [1.0]
 
 
-def vectorised(p: ControlParams):
-    inp = LawInput(pose=np.array([POSE]), ref=np.array([REF]), nbr_pos=np.array([NBRS]),
-                   nbr_valid=np.ones((1, len(NBRS)), bool),
-                   obs_center=np.array([[o[:2] for o in OBSTACLES]]),
-                   obs_radius=np.array([[o[2] for o in OBSTACLES]]),
-                   obs_valid=np.ones((1, len(OBSTACLES)), bool))
-    return LawMemory.initial(1), lambda mem: control_step(inp, mem, p, dt=p.period).memory
-
-
-def single(p: ControlParams):
-    return SingleMemory(), lambda mem: single_step(POSE, REF, NBRS, OBSTACLES, mem, p,
-                                                   p.period)[3]
+def law(p: ControlParams):
+    lp = LawParams.of(p)
+    return LawMemory(), lambda mem: law_step(*POSE, *REF, NBR_X, NBR_Y, OBS_X, OBS_Y, OBS_R,
+                                             mem, lp, p.period)[3]
 
 
 def median_us(setup, p: ControlParams, steps: int, sweep: np.ndarray | None) -> float:
@@ -54,7 +46,7 @@ def main() -> None:
     p = ControlParams()
     sweep = np.ones(16 * 2**20 // 8)
     print(f"{'law step':<22} {'hot [us]':>9} {'cold [us]':>10}")
-    for name, setup in (("agent.law (N = 1)", vectorised), ("agent.law_single", single)):
+    for name, setup in (("agent.law.law_step", law),):
         hot = median_us(setup, p, args.steps, None)
         cold = median_us(setup, p, args.steps // 4, sweep)
         print(f"{name:<22} {hot:9.1f} {cold:10.1f}")

@@ -1,13 +1,17 @@
-"""The batch simulator: every robot of a swarm stepped in one process, vectorised.
+"""The batch simulator: every robot of a swarm stepped in one process.
 
 Each control period: references at t, per-robot sensing (neighbours and obstacles inside the
-sensing range only), one call of the same pure law the agent process runs, then the plant
-integrated over ``substeps`` physics steps with distances and clearances checked at each.
+sensing range only), the one law of the agents for every robot, then the plant integrated
+over ``substeps`` physics steps with distances and clearances checked at each. The period
+is :mod:`firmware_sim.swarm_step`, compiled with numba together with the law when numba is
+installed (:mod:`firmware_sim.compiled`), interpreted otherwise: the same source either way.
 Time is simulated: a run is deterministic and as fast as the CPU allows.
 """
 from __future__ import annotations
 
+import logging
 import math
+import types
 from dataclasses import dataclass
 from typing import Callable
 
@@ -15,11 +19,13 @@ import numpy as np
 
 from agent.config import ControlParams, RobotParams
 from agent.formation import Formation
-from agent.law import LawInput, LawMemory, control_step
+from agent.law import LawParams
+from firmware_sim import compiled, swarm_step
 from firmware_sim.metrics import RunMetrics, tolerance
-from agent.kinematics import integrate_arc
-from firmware_sim.plant import IdealPlant, PlantKind, make_plant
-from firmware_sim.world import Obstacles, Sensed, Sensing
+from firmware_sim.plant import PlantKind
+from firmware_sim.world import Obstacles
+
+log = logging.getLogger(__name__)
 
 TRAJECTORY_COLUMNS = ("t", "id", "x", "y", "theta", "v", "u", "mode", "x_d", "y_d")
 
@@ -33,6 +39,7 @@ class SimOptions:
     substeps: int = 4                    # physics steps per control period
     plant: PlantKind = PlantKind.IDEAL
     record_every: int = 1                # record one control period in this many; 0: none
+    compiled: bool | None = None         # numba; None: when it is installed
 
     def __post_init__(self) -> None:
         if not (self.duration > 0 and math.isfinite(self.duration)):
@@ -61,6 +68,23 @@ class SimResult:
     law_seconds: float = 0.0  # wall time spent in the law (for benchmarks)
 
 
+def _engine(options: SimOptions) -> types.SimpleNamespace | types.ModuleType:
+    """The compiled kernels, or the interpreted module when numba is absent or not wanted."""
+    want = options.compiled
+    if want is None:
+        want = compiled.available()
+        if not want:
+            log.warning("numba is not installed (pip install 'boundswarm[sim]'): the batch "
+                        "simulator runs the law interpreted, far slower")
+    elif want and not compiled.available():
+        raise RuntimeError("SimOptions.compiled: numba is not installed "
+                           "(pip install 'boundswarm[sim]')")
+    return compiled.kernels() if want else swarm_step
+
+
+PARALLEL_MIN = 500   # robots; below, waking threads costs more than it saves
+
+
 def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacles: Obstacles,
              control: ControlParams, robot: RobotParams, options: SimOptions,
              progress: Callable[[float], None] | None = None,
@@ -68,17 +92,24 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     """Run the swarm from ``poses0`` (N, 3) for ``options.duration`` seconds.
 
     ``progress`` is called with the completed fraction about a hundred times; ``clock``
-    (e.g. ``time.perf_counter``) is used, when given, to time the law for benchmarks.
+    (e.g. ``time.perf_counter``) is used, when given, to time sensing and the law for
+    benchmarks.
     """
     ids = np.asarray(ids)
-    pose = np.array(poses0, dtype=float)
+    pose = np.array(poses0, dtype=float).reshape(-1, 3)
     n = len(pose)
     if len(formation.offsets) != n:
         raise ValueError(f"formation has {len(formation.offsets)} places for {n} robots")
+    k = _engine(options)
+    if k is not swarm_step:
+        compiled.use_threads(n >= PARALLEL_MIN)
     T = control.period
     steps = int(round(options.duration / T))
-    plant = make_plant(options.plant, robot, n)
-    memory = LawMemory.initial(n)
+    params = LawParams.of(control)
+    offsets = np.ascontiguousarray(formation.offsets, dtype=float).reshape(n, 2)
+    motion = np.array([*formation.center0, *formation.velocity, formation.omega], dtype=float)
+    obs = np.column_stack([obstacles.centers.reshape(-1, 2), obstacles.radii]).astype(float)
+    ideal = options.plant is PlantKind.IDEAL
     metrics = RunMetrics(ids=ids, a=control.a)
     every = options.record_every
     n_rec = (steps // every + 1) if every else 0
@@ -87,95 +118,61 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     rec_v, rec_u = np.zeros((n_rec, n)), np.zeros((n_rec, n))
     rec_mode = np.zeros((n_rec, n), np.int8)
     rec_ref = np.zeros((n_rec, n, 2))
-    dt = T / options.substeps
+    S = options.substeps
+    dt = T / S
     report_every = max(1, steps // 100)
     law_seconds = 0.0
-    sensing = Sensing(obstacles, options.sensing_range)
-    step_reach = max(control.v_max, robot.v_wheel_max) * T   # m, farthest move per period
+    reach = max(control.v_max, robot.v_wheel_max) * T   # m, farthest move per period
 
-    for k in range(steps + 1):
-        t = k * T
-        ref, ref_vel = formation.reference(t)
-        seen = sensing(pose[:, :2])
-        inp = LawInput(pose=pose, ref=ref,
-                       nbr_pos=np.take(np.ascontiguousarray(pose[:, :2]), seen.nbr_idx, axis=0),
-                       nbr_valid=seen.nbr_valid,
-                       obs_center=obstacles.centers[seen.obs_idx],
-                       obs_radius=obstacles.radii[seen.obs_idx], obs_valid=seen.obs_valid)
+    mem_f, mem_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
+    new_f, new_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
+    cmd, ref = np.zeros((n, 3)), np.zeros((n, 4))
+    wheels = np.zeros((n, 2))
+    pos = np.zeros((S + 1, n, 2))
+    dmin, cmin = np.zeros(S + 1), np.zeros(S + 1)
+    cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
+    for step in range(steps + 1):
+        t = step * T
         t0 = clock() if clock else 0.0
-        out = control_step(inp, memory, control)
+        while True:
+            watch_j = np.full((n, watch_cap), -1, np.int64)
+            watch_k = np.full((n, watch_cap), -1, np.int64)
+            need, need_watch = k.control(pose, mem_f, mem_i, offsets, motion, t, obs, params, T,
+                                         options.sensing_range, control.a, reach, cap,
+                                         watch_cap, cmd, ref, new_f, new_i, watch_j, watch_k)
+            if need <= cap and need_watch <= watch_cap:
+                break
+            cap, watch_cap = max(cap, int(need)), max(watch_cap, int(need_watch))
         if clock:
             law_seconds += clock() - t0
-        memory = out.memory
+        mem_f, new_f, mem_i, new_i = new_f, mem_f, new_i, mem_i
+        v, u, mode = cmd[:, 0].copy(), cmd[:, 1].copy(), cmd[:, 2].astype(np.int8)
         err = np.hypot(pose[:, 0] - ref[:, 0], pose[:, 1] - ref[:, 1])
-        metrics.observe_control(t, err, tolerance(ref_vel, control.K), out.v, out.u, out.mode)
-        if every and k % every == 0:
-            r = k // every
-            rec_t[r], rec_pose[r], rec_v[r], rec_u[r] = t, pose, out.v, out.u
-            rec_mode[r], rec_ref[r] = out.mode, ref
-        watch = _Watch(pose[:, :2], seen, obstacles, control.a, step_reach)
-        if k == 0:
-            watch.observe(metrics, t, pose)
-        if k == steps:
-            break
-        if isinstance(plant, IdealPlant):
-            # exact arcs: the substeps are needed only for the watched robots
-            m = watch.members
-            for s in range(1, options.substeps):
-                sub = integrate_arc(pose[m], out.v[m], out.u[m], s * dt)
-                watch.observe_members(metrics, t + s * dt, sub[:, :2])
-            pose = integrate_arc(pose, out.v, out.u, T)
-            watch.observe(metrics, t + T, pose)
+        metrics.observe_control(t, err, tolerance(ref[:, 2:], control.K), v, u, mode)
+        if every and step % every == 0:
+            r = step // every
+            rec_t[r], rec_pose[r], rec_v[r], rec_u[r] = t, pose, v, u
+            rec_mode[r], rec_ref[r] = mode, ref[:, :2]
+        last = step == steps
+        first = 0 if step == 0 else 1
+        if last:
+            pos[0] = pose[:, :2]
         else:
-            for s in range(1, options.substeps + 1):
-                pose, _, _ = plant.step(pose, out.v, out.u, dt)
-                watch.observe(metrics, t + s * dt, pose)
-        if progress and k % report_every == 0:
-            progress(k / steps)
+            k.advance(pose, cmd, wheels, ideal, robot.wheel_radius, robot.wheel_base,
+                      robot.wheel_speed_limit, robot.wheel_ramp, dt, S, pos)
+        n_sub = 1 if last else S + 1
+        hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
+        k.geometry(pos[:n_sub], watch_j, watch_k, obs, control.a, first, dmin, cmin, hit_j,
+                   hit_k)
+        pairs = [(int(ids[i]), int(ids[watch_j[i, w]])) for i, w in zip(*np.nonzero(hit_j))]
+        inside = [int(ids[i]) for i in np.flatnonzero(hit_k.any(axis=1))]
+        for s in range(first, n_sub):
+            metrics.observe_extremes(t + s * dt, float(dmin[s]), float(cmin[s]), pairs, inside)
+        if last:
+            break
+        if progress and step % report_every == 0:
+            progress(step / steps)
     if progress:
         progress(1.0)
     return SimResult(ids=ids, t=rec_t, pose=rec_pose, v=rec_v, u=rec_u, mode=rec_mode,
                      ref=rec_ref, metrics=metrics, law_seconds=law_seconds)
-
-
-class _Watch:
-    """The pairs and robot-obstacle entries worth checking during one control period.
-
-    Robots move at most ``v_bound * T`` per period, so a pair farther apart at the start than
-    max(closest pair, a) + 4 v_bound T can be neither the closest pair nor closer than a during
-    the period (likewise for obstacles with 2 v_bound T): the minimum and the collisions found
-    on the watched subset at every physics step are exact.
-    """
-
-    def __init__(self, pos: np.ndarray, seen: Sensed, obstacles: Obstacles, a: float,
-                 step_reach: float):
-        d = seen.pair_dist
-        keep = d <= max(float(d.min(initial=np.inf)), a) + 4.0 * step_reach
-        self.pairs = seen.pairs[keep]
-        clear = self._clear(pos, seen.obs_idx, seen.obs_valid, obstacles)
-        low = clear.min(axis=1, initial=np.inf)
-        self.robots = np.flatnonzero(low <= max(float(low.min(initial=np.inf)), 0.0)
-                                     + 2.0 * step_reach)
-        self.obs_idx = seen.obs_idx[self.robots]
-        self.obs_valid = seen.obs_valid[self.robots]
-        self.obstacles = obstacles
-        # the robots involved, and the pairs and robots in their local numbering
-        self.members = np.unique(np.concatenate([self.pairs.ravel(), self.robots]))
-        self._pairs = np.searchsorted(self.members, self.pairs)
-        self._robots = np.searchsorted(self.members, self.robots)
-
-    @staticmethod
-    def _clear(pos, idx, valid, obstacles) -> np.ndarray:
-        rel = pos[:, None, :] - obstacles.centers[idx]
-        return np.where(valid, np.hypot(rel[..., 0], rel[..., 1]) - obstacles.radii[idx],
-                        np.inf)
-
-    def observe(self, metrics: RunMetrics, t: float, pose: np.ndarray) -> None:
-        """Check the swarm's poses (N, 3) at time t."""
-        self.observe_members(metrics, t, pose[self.members, :2])
-
-    def observe_members(self, metrics: RunMetrics, t: float, pos: np.ndarray) -> None:
-        """Check the positions (M, 2) of :attr:`members` only at time t."""
-        clear = self._clear(pos[self._robots], self.obs_idx, self.obs_valid, self.obstacles)
-        metrics.observe_geometry(t, pos, self._pairs.reshape(-1, 2), self._robots, clear,
-                                 index=self.members)

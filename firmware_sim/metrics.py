@@ -56,14 +56,21 @@ class RunMetrics:
         d = np.hypot(*(pos[pairs[:, 0]] - pos[pairs[:, 1]]).T)
         dmin = float(d.min()) if len(d) else math.inf
         cmin = float(clearance.min()) if clearance.size else math.inf
+        close = pairs[d < self.a]
+        inside = robots[(clearance < 0.0).any(axis=1)] if clearance.size else robots[:0]
+        self.observe_extremes(t, dmin, cmin, [(int(ids[i]), int(ids[j])) for i, j in close],
+                              [int(ids[i]) for i in inside])
+
+    def observe_extremes(self, t: float, dmin: float, cmin: float,
+                         colliding_pairs: list[tuple[int, int]],
+                         robots_in_obstacles: list[int]) -> None:
+        """The closest pair's distance [m] and the smallest clearance [m] at time t [s]
+        (inf: none in range), with the robot-id pairs closer than a and the robots inside
+        an obstacle."""
         self.min_pair_distance = min(self.min_pair_distance, dmin)
         self.min_obstacle_clearance = min(self.min_obstacle_clearance, cmin)
-        if dmin < self.a:
-            for i, j in pairs[d < self.a]:
-                self.colliding_pairs.add((int(ids[i]), int(ids[j])))
-        if cmin < 0.0:
-            inside = robots[(clearance < 0.0).any(axis=1)]
-            self.robots_in_obstacles.update(int(ids[i]) for i in inside)
+        self.colliding_pairs.update(colliding_pairs)
+        self.robots_in_obstacles.update(robots_in_obstacles)
         self.geometry_t.append(t)
         self.geometry_dmin.append(dmin)
         self.geometry_clear.append(cmin)

@@ -109,9 +109,9 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     clock.now += 1.0                           # older than the 0.5 s staleness
     a.arm()
     a.set_mode(AgentMode.FORMATION)
-    nbr, obstacles = a._surroundings(a.odometry.pose, a.swarm.neighbours(), a.swarm.obstacles(),
-                                     clock.wall())
-    assert nbr == [] and obstacles == [(4.0, 0.0, 0.5)]
+    near, obs_x, obs_y, obs_r = a._surroundings(a.odometry.pose, a.swarm.neighbours(),
+                                                a.swarm.obstacles(), clock.wall())
+    assert near.fresh_x == [] and (obs_x, obs_y, obs_r) == ([4.0], [0.0], [0.5])
     dmin = np.inf
     for _ in range(400):
         a.tick()

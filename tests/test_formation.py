@@ -46,10 +46,11 @@ def test_offsets_kind_needs_explicit_offsets():
     assert math.isinf(Formation(np.zeros((1, 2)), (0.0, 0.0)).min_spacing())
 
 
-def test_point_is_one_robots_reference_in_floats():
+def test_point_is_one_robots_reference_and_velocity_in_floats():
     f = Formation(formation_offsets(FormationKind.WEDGE, 5, 3.0), (2.0, -1.0), (0.7, 0.2), 0.3)
     for t in (0.0, 1.3, 17.9):
-        p, _ = f.reference(t)
+        p, v = f.reference(t)
         for i in range(5):
             got = f.point(i, t)
-            assert type(got[0]) is float and got == pytest.approx(tuple(p[i]), abs=1e-12)
+            assert all(type(g) is float for g in got)
+            assert got == (*p[i], *v[i])

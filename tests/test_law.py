@@ -1,6 +1,5 @@
-"""Unit tests of the three-mode bounded law and each of DESIGN.md's additions, on both its
-implementations (agent.law, vectorised; agent.law_single, one robot in floats)."""
-import dataclasses
+"""Unit tests of the three-mode bounded law and each addition of docs/controller.md, run
+interpreted (as agents run it) and compiled (as the batch simulator runs it)."""
 import math
 
 import numpy as np
@@ -17,7 +16,7 @@ P = ControlParams()
 
 @pytest.fixture(autouse=True, params=lawcase.IMPLS)
 def impl(request, monkeypatch):
-    """Every test runs on both implementations of the law."""
+    """Every test runs on the law interpreted and compiled."""
     monkeypatch.setattr(lawcase, "IMPL", request.param)
     return request.param
 
@@ -83,7 +82,7 @@ def test_hysteresis_on_neighbour_avoidance():
     inp = single([0, 0, 0], [20, 0], nbrs=[[P.b + 0.25, 0]])
     fresh = step(inp)
     assert fresh.mode[0] == Mode.TRACK                 # entering needs r < b
-    avoiding = dataclasses.replace(LawMemory.initial(1), avoiding=np.array([True]))
+    avoiding = LawMemory(avoiding=True)
     held = step(inp, avoiding)
     assert held.mode[0] == Mode.AVOID                  # leaving needs r > b + hysteresis
     released = step(single([0, 0, 0], [20, 0], nbrs=[[P.b + P.hysteresis + 0.1, 0]]),
@@ -119,41 +118,42 @@ def test_rotate_heads_along_the_obstacle_tangent():
     assert out.mode[0] == Mode.ROTATE
     assert out.u[0] == pytest.approx(0.0, abs=1e-12)   # already on the tangent
     assert out.v[0] > 0
-    assert out.memory.side[0] == 1
+    assert out.memory.side == 1
     # the other side of the obstacle picks the other tangent
     below = step(single([-5.5, -0.5, 0.0], [10, 0], obstacles=[obstacle]))
-    assert below.memory.side[0] == -1
+    assert below.memory.side == -1
 
 
 def test_rotate_tangent_has_a_positive_component_toward_the_reference():
+    unclipped = ControlParams(u_max=4.0 * math.pi)     # |K_theta e_theta| <= 3 pi < u_max
     for y in np.linspace(-2.5, 2.5, 11):
         pos = np.array([-5.6, y])
-        out = step(single([*pos, 0.0], [12, -y / 2], obstacles=[((0, 0), 3.0)]))
-        assert out.mode[0] == Mode.ROTATE
-        theta_d = 0.0 + out.u[0] / P.K_theta           # u = -K_theta (0 - theta_d), unclipped
+        out = step(single([*pos, 0.0], [12, -y / 2], obstacles=[((0, 0), 3.0)]),
+                   params=unclipped)
+        assert out.mode[0] == Mode.ROTATE and abs(out.u[0]) < unclipped.u_max
+        theta_d = 0.0 + out.u[0] / P.K_theta           # u = -K_theta (0 - theta_d)
         ref_dir = np.array([12, -y / 2]) - pos
-        if abs(out.u[0]) < P.u_max:
-            assert np.array([math.cos(theta_d), math.sin(theta_d)]) @ ref_dir > 0
+        assert np.array([math.cos(theta_d), math.sin(theta_d)]) @ ref_dir > 0
 
 
 def test_no_rotate_when_the_path_is_clear():
     out = step(single([-5.5, 6.0, 0.0], [10, 6.0], obstacles=[((0, 0), 3.0)]))
     assert out.mode[0] == Mode.TRACK
-    assert out.memory.side[0] == 0
+    assert out.memory.side == 0
 
 
 def test_latched_side_kept_until_the_path_is_clear():
     obstacle = [((0.0, 0.0), 3.0)]
     first = step(single([-5.5, 0.5, 0.0], [10, 0], obstacles=obstacle))
-    assert first.memory.side[0] == 1
+    assert first.memory.side == 1
     # now below the axis: a fresh robot would pick side -1, the latched one keeps +1
     fresh = step(single([-5.5, -0.8, 0.0], [10, 0], obstacles=obstacle))
-    assert fresh.memory.side[0] == -1
+    assert fresh.memory.side == -1
     kept = step(single([-5.5, -0.8, 0.0], [10, 0], obstacles=obstacle), first.memory)
-    assert kept.mode[0] == Mode.ROTATE and kept.memory.side[0] == 1
+    assert kept.mode[0] == Mode.ROTATE and kept.memory.side == 1
     # past the obstacle, the straight path to the reference is clear: latch released
     clear = step(single([4.0, 3.6, 0.0], [10, 5.0], obstacles=obstacle), kept.memory)
-    assert clear.memory.side[0] == 0 and clear.mode[0] == Mode.TRACK
+    assert clear.memory.side == 0 and clear.mode[0] == Mode.TRACK
 
 
 def test_latch_survives_an_avoid_episode():
@@ -161,28 +161,27 @@ def test_latch_survives_an_avoid_episode():
     first = step(single([-5.5, 0.5, 0.0], [10, 0], obstacles=obstacle))
     avoid = step(single([-5.5, -0.8, 0.0], [10, 0], nbrs=[[-5.5, -2.0]], obstacles=obstacle),
                  first.memory)
-    assert avoid.mode[0] == Mode.AVOID and avoid.memory.side[0] == 1
+    assert avoid.mode[0] == Mode.AVOID and avoid.memory.side == 1
 
 
 def test_corner_rule_hands_over_to_the_obstacle_ahead():
     # going north past A (A on the right, side +1); B ahead on the right, close to A
     a, b_ = ((0.0, 0.0), 3.0), ((-1.0, 5.5), 1.5)
     first = step(single([-5.5, 0.5, 1.5], [10, 2], obstacles=[a]))
-    assert first.mode[0] == Mode.ROTATE and first.memory.side[0] == 1
+    assert first.mode[0] == Mode.ROTATE and first.memory.side == 1
     both = step(single([-5.2, 2.5, 1.5], [10, 2], obstacles=[a, b_]), first.memory)
     assert both.mode[0] == Mode.ROTATE
-    assert tuple(both.memory.followed_center[0]) == (-1.0, 5.5)
-    assert both.memory.side[0] == 1
+    assert (both.memory.center_x, both.memory.center_y) == (-1.0, 5.5)
+    assert both.memory.side == 1
     # an obstacle on the other (left) side does not take over
     left = step(single([-5.2, 2.5, 1.5], [10, 2], obstacles=[a, ((-9.5, 4.0), 1.5)]),
                 first.memory)
-    assert tuple(left.memory.followed_center[0]) == (0.0, 0.0)
+    assert (left.memory.center_x, left.memory.center_y) == (0.0, 0.0)
 
 
 def test_u_is_clipped():
     # the reference jumped across the robot: the finite-difference heading rate is huge
-    mem = dataclasses.replace(LawMemory.initial(1), prev_error=np.array([[0.0, -0.01]]),
-                              has_prev=np.array([True]))
+    mem = LawMemory(prev_ex=0.0, prev_ey=-0.01, has_prev=True)
     out = step(single([0, 0, 0], [-0.01, 0.0]), mem)
     assert abs(out.u[0]) == pytest.approx(P.u_max)
     small = ControlParams(u_max=1.0)
@@ -191,8 +190,7 @@ def test_u_is_clipped():
 
 def test_heading_rate_feed_forward_from_the_error_difference():
     # the error rotates by 0.01 rad in one period: theta_d_dot = 0.5 rad/s
-    e_prev = np.array([[-10 * math.cos(-0.01), -10 * math.sin(-0.01)]])
-    mem = dataclasses.replace(LawMemory.initial(1), prev_error=e_prev,
-                              has_prev=np.array([True]))
+    mem = LawMemory(prev_ex=-10 * math.cos(-0.01), prev_ey=-10 * math.sin(-0.01),
+                    has_prev=True)
     out = step(single([0, 0, 0], [10, 0]), mem)
     assert out.u[0] == pytest.approx(0.01 / P.period, rel=1e-3)

@@ -7,7 +7,7 @@ import uuid
 import can
 import pytest
 
-from agent.kinematics import body_velocity, wheel_commands
+from agent.kinematics import body_velocity, wheel_command
 from firmware_sim.odrive_sim import DriverPair, EmulatedAxis
 from transport.odrive_frames import AxisState, Cmd, encode, request
 from transport.wheel_drivers import WheelDrivers
@@ -67,7 +67,7 @@ def test_arming_and_commanded_velocities_reach_the_encoders(rig):
 
 def test_velocity_limit_and_saturation_keep_the_curvature(rig):
     rig.host.arm()
-    right, left = wheel_commands(12.0, 6.0, 0.2, 0.8, 10.0)   # beyond the wheel limit
+    right, left = wheel_command(12.0, 6.0, 0.2, 0.8, 10.0)   # beyond the wheel limit
     rig.run(0.1, command=(float(right), float(left)))
     fb = rig.host.feedback()
     v, u = body_velocity(2 * math.pi * fb.vel_rev_s[0], 2 * math.pi * fb.vel_rev_s[1], 0.2, 0.8)

@@ -5,12 +5,12 @@ import pytest
 
 from agent.config import RobotParams
 from agent.odometry import Odometry
-from firmware_sim.plant import WheelPlant
+from firmware_sim.swarm_step import advance
 
 
 def test_odometry_from_encoders_matches_the_plant_truth():
     robot = RobotParams()
-    plant = WheelPlant(robot, 1)
+    wheels = np.zeros((1, 2))                            # actual (right, left) [rev/s]
     truth = np.array([[1.0, -2.0, 0.4]])
     odo = Odometry(robot.wheel_radius, robot.wheel_base, truth[0].copy())
     enc = np.zeros(2)                                    # encoder positions [rev]
@@ -20,8 +20,10 @@ def test_odometry_from_encoders_matches_the_plant_truth():
     for k in range(2000):
         if k % 200 == 0:
             v, u = rng.uniform(-8, 8), rng.uniform(-4, 4)
-        truth, _, _ = plant.step(truth, np.array([v]), np.array([u]), dt)
-        enc = enc + plant.wheel_rev_s[0] * dt             # encoders integrate actual speed
+        advance(truth, np.array([[v, u, 0.0]]), wheels, False, robot.wheel_radius,
+                robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1,
+                np.zeros((2, 1, 2)))
+        enc = enc + wheels[0] * dt                        # encoders integrate actual speed
         est = odo.update(*enc)
     assert est[:2] == pytest.approx(truth[0, :2], abs=1e-6)
     assert math.cos(est[2] - truth[0, 2]) == pytest.approx(1.0, abs=1e-9)

@@ -1,50 +1,64 @@
+"""What robots sense (firmware_sim.swarm_step's cell-list search) against brute force."""
 import numpy as np
 import pytest
 
-from firmware_sim.world import Obstacles, Sensing, sense
+from firmware_sim.swarm_step import build_grid, sense_neighbours, sense_obstacles
+from firmware_sim.world import Obstacles
 
 
-def _sets(seen):
-    nb = {(i, int(j)) for i in range(seen.nbr_idx.shape[0])
-          for j, ok in zip(seen.nbr_idx[i], seen.nbr_valid[i]) if ok}
-    ob = {(i, int(k)) for i in range(seen.obs_idx.shape[0])
-          for k, ok in zip(seen.obs_idx[i], seen.obs_valid[i]) if ok}
-    return nb, ob, {tuple(p) for p in seen.pairs.tolist()}
+def sensed(pos, obs, rng_m=8.0, cap=64):
+    """{(i, j)} neighbours and {(i, k)} obstacles that the search finds."""
+    pose = np.column_stack([pos, np.zeros(len(pos))])
+    grid = build_grid(pose[:, 0], pose[:, 1], rng_m, 4 * len(pos) + 64)
+    o = np.column_stack([obs.centers, obs.radii]).reshape(-1, 3)
+    ogrid = build_grid(o[:, 0], o[:, 1], rng_m + (o[:, 2].max() if len(o) else 0.0),
+                       4 * len(o) + 64)
+    bufs = [np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap, np.int64)]
+    nb, ob = set(), set()
+    for i in range(len(pos)):
+        m = sense_neighbours(i, pose, rng_m, grid, cap, *bufs)
+        assert m <= cap
+        nb |= {(i, int(j)) for j in bufs[3][:m]}
+        assert np.allclose(bufs[2][:m], np.hypot(*(pos[bufs[3][:m]] - pos[i]).T))
+        k = sense_obstacles(pos[i, 0], pos[i, 1], o, rng_m, ogrid, cap, *bufs)
+        ob |= {(i, int(kk)) for kk in bufs[3][:k]}
+    return nb, ob
 
 
-def test_dense_and_tree_search_agree():
-    rng = np.random.default_rng(1)
+def brute(pos, obs, rng_m=8.0):
+    d = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
+    nb = {(i, j) for i, j in zip(*np.nonzero(d <= rng_m)) if i != j}
+    ob = set(zip(*np.nonzero(obs.clearance(pos) <= rng_m)))
+    return {(int(i), int(j)) for i, j in nb}, {(int(i), int(k)) for i, k in ob}
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_cell_lists_find_exactly_what_is_in_range(seed):
+    rng = np.random.default_rng(seed)
     pos = rng.uniform(0, 60, (300, 2))
-    obs = Obstacles(rng.uniform(0, 60, (40, 2)), rng.uniform(0.5, 3, 40))
-    dense = _sets(sense(pos, obs, 8.0, dense_max=2000))
-    tree = _sets(sense(pos, obs, 8.0, dense_max=10))
-    assert dense == tree
-    assert len(dense[0]) > 100 and len(dense[1]) > 50
+    obs = Obstacles(rng.uniform(-5, 65, (40, 2)), rng.uniform(0.5, 3, 40))
+    got, want = sensed(pos, obs), brute(pos, obs)
+    assert got == want
+    assert len(want[0]) > 100 and len(want[1]) > 50
 
 
 def test_only_what_is_in_range_is_sensed():
     pos = np.array([[0.0, 0.0], [7.9, 0.0], [8.1, 0.0]])
     obs = Obstacles(np.array([[0.0, 11.0], [0.0, -12.5]]), np.array([3.0, 4.0]))
-    nb, ob, pairs = _sets(sense(pos, obs, 8.0))
+    nb, ob = sensed(pos, obs)
     assert (0, 1) in nb and (0, 2) not in nb and (1, 2) in nb
     assert (0, 0) in ob and (0, 1) not in ob          # surface 8.0 vs 8.5 m away
-    assert pairs == {(0, 1), (1, 2)}
 
 
-def test_clearance_and_pair_distances():
+def test_a_full_buffer_reports_how_many_there_are():
+    pos = np.column_stack([np.arange(10.0) * 0.5, np.zeros(10)])
+    pose = np.column_stack([pos, np.zeros(10)])
+    grid = build_grid(pose[:, 0], pose[:, 1], 8.0, 100)
+    bufs = [np.empty(3), np.empty(3), np.empty(3), np.empty(3, np.int64)]
+    assert sense_neighbours(0, pose, 8.0, grid, 3, *bufs) == 9
+
+
+def test_clearance():
     obs = Obstacles(np.array([[0.0, 0.0]]), np.array([2.0]))
     assert obs.clearance(np.array([[3.0, 4.0]]))[0, 0] == pytest.approx(3.0)
-    seen = sense(np.array([[0.0, 0], [3, 4]]), obs, 8.0)
-    assert seen.pairs.tolist() == [[0, 1]] and seen.pair_dist[0] == 5.0
     assert len(Obstacles.empty()) == 0
-
-
-def test_verlet_sensing_equals_a_fresh_search_while_robots_move():
-    rng = np.random.default_rng(2)
-    pos = rng.uniform(0, 80, (400, 2))
-    obs = Obstacles(rng.uniform(0, 80, (300, 2)), rng.uniform(0.5, 3, 300))
-    sensing = Sensing(obs, 8.0, skin=2.0, dense_max=50)
-    for _ in range(12):
-        assert _sets(sensing(pos)) == _sets(sense(pos, obs, 8.0))
-        pos = pos + rng.uniform(-0.3, 0.3, pos.shape)
-    assert 1 < sensing.rebuilds < 12                     # lists were reused, and renewed

@@ -1,0 +1,265 @@
+"""One control period of a whole swarm: sensing, the one law for every robot, the plant.
+
+Written for numba (:mod:`firmware_sim.compiled` compiles it together with the law), and
+runnable as it is (interpreted, slowly): only numpy arrays, floats, ints and loops.
+``prange`` is ``range`` here and ``numba.prange`` when compiled; every robot's iteration is
+independent of the others', so a run's results do not depend on the number of threads.
+
+Sensing: each robot sees the neighbours whose centre is within the sensing range and the
+obstacles whose surface is, found through uniform grids (cell lists). Geometry for safety
+is measured on the plant's poses at every physics substep, for the pairs and obstacles that
+could be the closest or closer than a during the period (see :func:`control`).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.formation import reference_point
+from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
+from agent.law import LawMemory, LawParams, law_step
+
+prange = range   # numba.prange when compiled
+
+
+Grid = tuple[np.ndarray, np.ndarray, float, float, float, int, int]
+
+
+def build_grid(px: np.ndarray, py: np.ndarray, cell: float, max_cells: int) -> Grid:
+    """Cell lists of points (px, py): (start, order, x0, y0, cell, nx, ny).
+
+    The points of cell (ix, iy) are ``order[start[c]:start[c + 1]]`` with c = ix * ny + iy,
+    ix = floor((x - x0) / cell). The cell size grows beyond ``cell`` [m] when more than
+    ``max_cells`` cells would be needed (a sparse, spread-out swarm), never shrinks.
+    """
+    n = len(px)
+    x0, y0 = (px.min(), py.min()) if n else (0.0, 0.0)
+    span_x, span_y = (px.max() - x0, py.max() - y0) if n else (0.0, 0.0)
+    while (int(span_x / cell) + 1) * (int(span_y / cell) + 1) > max_cells:
+        cell *= 2.0
+    nx, ny = int(span_x / cell) + 1, int(span_y / cell) + 1
+    start = np.zeros(nx * ny + 1, np.int64)
+    key = np.empty(n, np.int64)
+    for i in range(n):
+        key[i] = int((px[i] - x0) / cell) * ny + int((py[i] - y0) / cell)
+        start[key[i] + 1] += 1
+    for c in range(nx * ny):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[key[i]]] = i
+        fill[key[i]] += 1
+    return start, order, x0, y0, cell, nx, ny
+
+
+def _cells_around(x: float, y: float, x0: float, y0: float, cell: float, nx: int, ny: int
+                  ) -> tuple[int, int, int, int]:
+    """(ix_lo, ix_hi, iy_lo, iy_hi): the 3 x 3 block of cells around (x, y), clipped."""
+    ix = int(math.floor((x - x0) / cell))
+    iy = int(math.floor((y - y0) / cell))
+    return max(ix - 1, 0), min(ix + 1, nx - 1), max(iy - 1, 0), min(iy + 1, ny - 1)
+
+
+def sense_neighbours(i: int, pose: np.ndarray, sensing_range: float, grid: Grid, cap: int,
+                     out_x: np.ndarray, out_y: np.ndarray, out_d: np.ndarray,
+                     out_j: np.ndarray) -> int:
+    """The robots whose centre is within ``sensing_range`` [m] of robot i's (``grid`` of
+    the swarm's positions): their positions, distances and indices in the first entries of
+    the outputs (at most ``cap``); returns how many there are."""
+    start, order, x0, y0, cell, nx, ny = grid
+    x, y = pose[i, 0], pose[i, 1]
+    r2 = sensing_range * sensing_range
+    m = 0
+    lo_x, hi_x, lo_y, hi_y = _cells_around(x, y, x0, y0, cell, nx, ny)
+    for cx in range(lo_x, hi_x + 1):
+        for c in range(cx * ny + lo_y, cx * ny + hi_y + 1):
+            for q in range(start[c], start[c + 1]):
+                j = order[q]
+                dx, dy = pose[j, 0] - x, pose[j, 1] - y
+                d2 = dx * dx + dy * dy
+                if j != i and d2 <= r2:
+                    if m < cap:
+                        out_x[m], out_y[m] = pose[j, 0], pose[j, 1]
+                        out_d[m], out_j[m] = math.sqrt(d2), j
+                    m += 1
+    return m
+
+
+def sense_obstacles(x: float, y: float, obs: np.ndarray, sensing_range: float, grid: Grid,
+                    cap: int, out_x: np.ndarray, out_y: np.ndarray, out_r: np.ndarray,
+                    out_k: np.ndarray) -> int:
+    """The obstacles (K, 3) whose surface is within ``sensing_range`` [m] of (x, y) (``grid``
+    of their centres, cells at least the range plus the largest radius): centres, radii
+    and indices in the first entries of the outputs (at most ``cap``); returns how many."""
+    start, order, x0, y0, cell, nx, ny = grid
+    k = 0
+    lo_x, hi_x, lo_y, hi_y = _cells_around(x, y, x0, y0, cell, nx, ny)
+    for cx in range(lo_x, hi_x + 1):
+        for c in range(cx * ny + lo_y, cx * ny + hi_y + 1):
+            for q in range(start[c], start[c + 1]):
+                kk = order[q]
+                dx, dy = obs[kk, 0] - x, obs[kk, 1] - y
+                if math.sqrt(dx * dx + dy * dy) - obs[kk, 2] <= sensing_range:
+                    if k < cap:
+                        out_x[k], out_y[k], out_r[k], out_k[k] = (obs[kk, 0], obs[kk, 1],
+                                                                  obs[kk, 2], kk)
+                    k += 1
+    return k
+
+
+def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray,
+            motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams, period: float,
+            sensing_range: float, a: float, reach: float, cap: int, watch_cap: int,
+            out_cmd: np.ndarray, out_ref: np.ndarray, out_mem_f: np.ndarray,
+            out_mem_i: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray
+            ) -> tuple[int, int]:
+    """Sense and run the law for every robot.
+
+    pose (N, 3) [m, m, rad]; memory of :class:`LawMemory` as floats (N, 5): prev_ex,
+    prev_ey, center_x, center_y, radius, and ints (N, 3): has_prev, avoiding, side;
+    offsets (N, 2) [m] and motion (5,) = centre0 x, y [m], velocity x, y [m/s], omega
+    [rad/s] of the formation; obs (K, 3) = obstacle centre x, y and radius [m].
+    Out: out_cmd (N, 3) = v [m/s], u [rad/s], mode; out_ref (N, 4) = p_d, p_d_dot; the new
+    memory; the watch lists: watch_j (N, watch_cap) the robots j > i whose distance is within
+    max(nearest of i, a) + 4 reach (``reach`` [m]: the farthest a robot moves in a period),
+    watch_k (N, watch_cap) the obstacles whose clearance is within the robot's smallest + 2
+    reach; -1 ends a list. Returns the capacities needed: (neighbours or obstacles sensed
+    by one robot, watch list); one above ``cap`` or ``watch_cap`` means the results are
+    incomplete: call again with the capacities returned.
+    """
+    n, k_obs = len(pose), len(obs)
+    grid = build_grid(pose[:, 0], pose[:, 1], sensing_range, 4 * n + 64)
+    max_r = obs[:, 2].max() if k_obs else 0.0
+    obs_grid = build_grid(obs[:, 0], obs[:, 1], sensing_range + max_r, 4 * k_obs + 64)
+    chunks = min(n, 64)
+    need = np.zeros(chunks, np.int64)
+    need_watch = np.zeros(chunks, np.int64)
+    for chunk in prange(chunks):
+        nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
+        nbr_j = np.empty(cap, np.int64)
+        o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
+        o_k = np.empty(cap, np.int64)
+        for i in range(chunk * n // chunks, (chunk + 1) * n // chunks):
+            x, y = pose[i, 0], pose[i, 1]
+            m = sense_neighbours(i, pose, sensing_range, grid, cap, nbr_x, nbr_y, nbr_d,
+                                 nbr_j)
+            k = sense_obstacles(x, y, obs, sensing_range, obs_grid, cap, o_x, o_y, o_r, o_k)
+            need[chunk] = max(need[chunk], m, k)
+            if m > cap or k > cap:
+                continue
+            rx, ry, rvx, rvy = reference_point(offsets[i, 0], offsets[i, 1], motion[0],
+                                               motion[1], motion[2], motion[3], motion[4], t)
+            mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
+                            mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4])
+            v, u, mode, new = law_step(x, y, pose[i, 2], rx, ry, nbr_x[:m], nbr_y[:m],
+                                       o_x[:k], o_y[:k], o_r[:k], mem, p, period)
+            out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2] = v, u, mode
+            out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
+            out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey
+            out_mem_f[i, 2], out_mem_f[i, 3], out_mem_f[i, 4] = (new.center_x, new.center_y,
+                                                                 new.radius)
+            out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
+                                                                 int(new.avoiding), new.side)
+            # what to watch during the period
+            nearest = math.inf
+            for q in range(m):
+                nearest = min(nearest, nbr_d[q])
+            limit = max(nearest, a) + 4.0 * reach
+            w = 0
+            for q in range(m):
+                if nbr_j[q] > i and nbr_d[q] <= limit:
+                    if w < watch_cap:
+                        watch_j[i, w] = nbr_j[q]
+                    w += 1
+            if w < watch_cap:
+                watch_j[i, w] = -1
+            lowest = math.inf
+            for q in range(k):
+                dx, dy = o_x[q] - x, o_y[q] - y
+                lowest = min(lowest, math.sqrt(dx * dx + dy * dy) - o_r[q])
+            wk = 0
+            for q in range(k):
+                dx, dy = o_x[q] - x, o_y[q] - y
+                if math.sqrt(dx * dx + dy * dy) - o_r[q] <= lowest + 2.0 * reach:
+                    if wk < watch_cap:
+                        watch_k[i, wk] = o_k[q]
+                    wk += 1
+            if wk < watch_cap:
+                watch_k[i, wk] = -1
+            need_watch[chunk] = max(need_watch[chunk], w + 1, wk + 1)
+    return (need.max(), need_watch.max()) if chunks else (0, 0)
+
+
+def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
+            wheel_radius: float, wheel_base: float, speed_limit: float, ramp: float,
+            dt: float, substeps: int, out_pos: np.ndarray) -> None:
+    """Move every robot through ``substeps`` physics steps of ``dt`` [s]; pose updated.
+
+    ``ideal``: the commands (v, u) of ``cmd`` applied exactly (one exact arc from the
+    period's start, evaluated at each substep). Otherwise through the wheel drivers: set-
+    points of :func:`wheel_command` (speed limit [rev/s]), wheel speeds ``wheels`` (N, 2)
+    (right, left) [rev/s] ramped at ``ramp`` [rev/s^2] and held over each substep.
+    out_pos (substeps + 1, N, 2): positions at the period's start and after each substep.
+    """
+    for i in prange(len(pose)):
+        x, y, th = pose[i, 0], pose[i, 1], pose[i, 2]
+        v, u = cmd[i, 0], cmd[i, 1]
+        out_pos[0, i, 0], out_pos[0, i, 1] = x, y
+        if ideal:
+            for s in range(1, substeps + 1):
+                h = s * dt
+                px, py, pth = arc_step(x, y, th, v * h, u * h)
+                out_pos[s, i, 0], out_pos[s, i, 1] = px, py
+            pose[i, 0], pose[i, 1], pose[i, 2] = px, py, pth
+        else:
+            target_r, target_l = wheel_command(v, u, wheel_radius, wheel_base, speed_limit)
+            step = ramp * dt
+            wr, wl = wheels[i, 0], wheels[i, 1]
+            for s in range(1, substeps + 1):
+                wr += min(max(target_r - wr, -step), step)
+                wl += min(max(target_l - wl, -step), step)
+                bv, bu = body_velocity(TWO_PI * wr, TWO_PI * wl, wheel_radius, wheel_base)
+                x, y, th = arc_step(x, y, th, bv * dt, bu * dt)
+                out_pos[s, i, 0], out_pos[s, i, 1] = x, y
+            wheels[i, 0], wheels[i, 1] = wr, wl
+            pose[i, 0], pose[i, 1], pose[i, 2] = x, y, th
+
+
+def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.ndarray,
+             a: float, first: int, out_dmin: np.ndarray, out_cmin: np.ndarray,
+             hit_j: np.ndarray, hit_k: np.ndarray) -> None:
+    """Closest pair and smallest clearance at each substep s >= ``first`` of ``pos`` (S, N,
+    2), over the watch lists of :func:`control`: out_dmin, out_cmin (S,) [m] (inf: none).
+    hit_j / hit_k (N, cap) are set where a watched pair came closer than a / a robot centre
+    entered a watched obstacle."""
+    n_sub, n = pos.shape[0], pos.shape[1]
+    d_robot = np.full((n_sub, n), np.inf)
+    c_robot = np.full((n_sub, n), np.inf)
+    for i in prange(n):
+        for s in range(first, n_sub):
+            x, y = pos[s, i, 0], pos[s, i, 1]
+            for w in range(watch_j.shape[1]):
+                j = watch_j[i, w]
+                if j < 0:
+                    break
+                dx, dy = pos[s, j, 0] - x, pos[s, j, 1] - y
+                d = math.sqrt(dx * dx + dy * dy)
+                d_robot[s, i] = min(d_robot[s, i], d)
+                if d < a:
+                    hit_j[i, w] = True
+            for w in range(watch_k.shape[1]):
+                k = watch_k[i, w]
+                if k < 0:
+                    break
+                dx, dy = obs[k, 0] - x, obs[k, 1] - y
+                c = math.sqrt(dx * dx + dy * dy) - obs[k, 2]
+                c_robot[s, i] = min(c_robot[s, i], c)
+                if c < 0.0:
+                    hit_k[i, w] = True
+    for s in range(n_sub):
+        out_dmin[s], out_cmin[s] = math.inf, math.inf
+        for i in range(n):
+            out_dmin[s] = min(out_dmin[s], d_robot[s, i])
+            out_cmin[s] = min(out_cmin[s], c_robot[s, i])
