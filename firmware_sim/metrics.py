@@ -3,10 +3,11 @@
 Fed as the run goes (no full trajectory needed, so it serves 10 000-robot batch runs and
 SITL alike): :meth:`RunMetrics.observe_geometry` at every physics (sub)step,
 :meth:`RunMetrics.observe_control` at every control period. :meth:`RunMetrics.summary` gives
-the ``metrics.json`` dictionary of DESIGN.md.
+the ``metrics.json`` dictionary (its keys are listed in docs/formats.md).
 
-Convergence tolerance per robot: |p_d_dot| / K + 0.25 m (the law has no feed-forward, so a
-robot trails its reference by |p_d_dot| / K in steady state).
+Convergence tolerance per robot: |p_d_dot| / K + 0.25 m. The law's only feed-forward is the
+heading rate in TRACK; v has none of the reference velocity, so in steady state a robot
+trails its reference by |p_d_dot| / K (docs/controller.md).
 """
 from __future__ import annotations
 

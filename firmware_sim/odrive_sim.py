@@ -10,8 +10,8 @@
 * watchdog: no Set_Input_Vel for ``watchdog`` s in closed loop -> WATCHDOG_TIMER_EXPIRED and
   IDLE; Estop -> ESTOP_REQUESTED and IDLE; in IDLE the wheel coasts down (first order,
   ``coast_tau``); Clear_Errors clears the errors;
-* the encoder position integrates the actual wheel speed; bus voltage and a current that
-  grows with acceleration and speed.
+* the encoder position integrates the actual wheel speed (its mean over each step); bus
+  voltage and a current that grows with acceleration and speed.
 
 :class:`DriverPair` serves the axes of one robot on its bus: commands in, Heartbeat (100 ms)
 and Get_Encoder_Estimates (10 ms) out, remote requests answered; malformed frames ignored
@@ -133,7 +133,7 @@ class Faults:
 
 @dataclass
 class DriverPair:
-    """The emulated drivers of one robot: ``nodes`` = (right, left) node ids on ``bus``."""
+    """The emulated drivers of one robot: axes ``right_node`` and ``left_node`` on ``bus``."""
 
     bus: can.BusABC
     right_node: int = 1

@@ -1,25 +1,38 @@
 """The SITL plant: emulated wheel drivers on CAN moving simulated robots, over real time.
 
 For each hosted robot the plant serves its two emulated drivers on the robot's own CAN bus
-and, every physics step, moves the robot along the exact arc its wheels turned through
-(the drivers' encoder positions, after their limits, ramps, watchdogs and faults), so the
-ground truth and the agent's odometry differ only by what the agent has not read yet. It
-publishes on Zenoh what the real world would give the robot's sensors: obstacle detections
-within sensing range (10 Hz) and, SITL only, the ground truth (every ``truth_every`` physics
-steps).
+and, every physics step, moves the robot by its own physics: the unicycle driven by the
+wheels' actual speeds (what the drivers apply after their limits, ramps, watchdogs and
+faults), integrated exactly as an arc by :func:`agent.kinematics.arc_step`, the batch
+simulator's integrator.
+
+Integration rule: over a step of ``dt`` the wheels turn at the speed the drivers reached at
+the step's end (after advancing their ramp by ``dt``), held over the whole step, as
+:class:`firmware_sim.plant.WheelPlant` holds its ramped wheel speeds: given the same wheel
+set-points both plants move a robot alike, to rounding.
+
+The truth never depends on what the robot measures or believes: the encoder positions,
+which the agent's odometry integrates, are not read. The drivers integrate their encoders
+with the speed's mean over each step, so a wheel's encoder and its turns in the truth differ
+by half a step's worth of the wheel's speed change since the start: an offset that does not
+grow with time.
+
+The plant publishes on Zenoh what the real world would give the robot's sensors: obstacle
+detections within sensing range (10 Hz) and, SITL only, the ground truth (every
+``truth_every`` physics steps).
 """
 from __future__ import annotations
 
 import logging
 import select
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from agent.config import RobotParams
-from agent.kinematics import TWO_PI, body_velocity
-from agent.odometry import Odometry
+from agent.kinematics import TWO_PI, arc_step, body_velocity
 from firmware_sim.world import Obstacles
 from transport.payloads import ObstaclesMsg, TruthMsg
 
@@ -35,7 +48,7 @@ class DriverPair(Protocol):
     def step(self, dt: float) -> None: ...              # advance the axes by dt [s]
     def wheel_state(self) -> tuple[float, float, float, float] | None: ...
     # (right, left) positions [rev], then (right, left) actual speeds [rev/s]; None while
-    # nothing is known yet (remote drivers not heard from)
+    # nothing is known yet (remote drivers not heard from). The plant reads only the speeds.
     def close(self) -> None: ...
 
 
@@ -44,9 +57,8 @@ class PlantRobot:
     robot_id: int
     pose: tuple[float, float, float]     # x [m], y [m], theta [rad]
     drivers: DriverPair
-    v: float = 0.0            # m/s, actual
-    u: float = 0.0            # rad/s, actual
-    wheels: Odometry | None = None   # the motion: exact arcs between wheel positions
+    v: float = 0.0            # m/s, actual (held over the last physics step)
+    u: float = 0.0            # rad/s, actual (held over the last physics step)
 
 
 class SitlPlant:
@@ -72,6 +84,8 @@ class SitlPlant:
                 self._fds[rb.robot_id] = fd
 
     def step(self, dt: float, now_m: float, now_w: float) -> None:
+        """Serve the drivers at ``now_m`` (monotonic [s]), advance them and the robots by
+        ``dt`` [s]; publish what is due, stamped ``now_w`` (wall clock [s])."""
         r = self.params
         waiting = {fd for fd, _ in self._poll.poll(0)} if self._fds else ()
         for rb in self.robots:
@@ -81,12 +95,10 @@ class SitlPlant:
             state = rb.drivers.wheel_state()
             if state is None:
                 continue
-            right_pos, left_pos, right, left = state
+            _, _, right, left = state            # speeds at the step's end [rev/s]
             v, u = body_velocity(TWO_PI * right, TWO_PI * left, r.wheel_radius, r.wheel_base)
             rb.v, rb.u = float(v), float(u)
-            if rb.wheels is None:       # the robot rolls exactly as its wheels turned
-                rb.wheels = Odometry(r.wheel_radius, r.wheel_base, rb.pose)
-            rb.pose = rb.wheels.update(right_pos, left_pos)
+            rb.pose = arc_step(*rb.pose, rb.v * dt, rb.u * dt)
         self._steps += 1
         if self._steps % self.truth_every == 0:
             self._seq += 1

@@ -1,8 +1,8 @@
-"""The run folder written by ``sim`` (and later ``sitl``) and read by ``report``.
+"""The run folder written by ``sim`` and ``sitl`` and read by ``report``.
 
-Layout::
+Layout (every file and key is described in docs/formats.md)::
 
-    DIR/metrics.json        metrics (DESIGN.md keys and more)
+    DIR/metrics.json        metrics
     DIR/trajectories.csv    one row per robot and control period:
                             t [s], id, x [m], y [m], theta [rad], v [m/s], u [rad/s],
                             mode (0 TRACK, 1 AVOID, 2 ROTATE), x_d [m], y_d [m]

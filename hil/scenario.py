@@ -1,6 +1,6 @@
 """Scenario files (TOML): robots, formation, obstacles, controller and robot parameters.
 
-Format (DESIGN.md, plus the optional ``[robot]`` and ``[sim]`` tables)::
+Format (every field, with its unit and default, in docs/formats.md)::
 
     name = "paper"
     duration = 20.0                 # s

@@ -8,10 +8,11 @@ from agent.config import RobotParams
 
 class _Wheels:
     """Drivers with scripted wheels: unknown for ``silent`` steps, then turning at
-    (right, left) [rev/s]."""
+    (right, left) [rev/s]; their encoders read ``encoder_gain`` times the turns (1: exact)."""
 
-    def __init__(self, right, left, silent=0):
+    def __init__(self, right, left, silent=0, encoder_gain=(1.0, 1.0)):
         self.speeds, self.silent, self.k, self.pos = (right, left), silent, 0, [0.25, -0.5]
+        self.gain = encoder_gain
 
     def fileno(self):
         return None
@@ -21,7 +22,7 @@ class _Wheels:
 
     def step(self, dt):
         self.k += 1
-        self.pos = [p + s * dt for p, s in zip(self.pos, self.speeds)]
+        self.pos = [p + g * s * dt for p, g, s in zip(self.pos, self.gain, self.speeds)]
 
     def wheel_state(self):
         return None if self.k <= self.silent else (*self.pos, *self.speeds)
@@ -30,37 +31,145 @@ class _Wheels:
         pass
 
 
-def test_sitl_plant_rolls_each_robot_as_its_odometry_would():
-    from agent.kinematics import TWO_PI, body_velocity
-    from agent.odometry import Odometry
-    from firmware_sim.sitl_plant import PlantRobot, SitlPlant
+def _arc(pose, v, u, t):
+    """Closed-form unicycle pose after ``t`` [s] at constant (v, u) (theta not wrapped)."""
+    x, y, th = pose
+    if u == 0.0:
+        return x + v * t * np.cos(th), y + v * t * np.sin(th), th
+    return (x + v / u * (np.sin(th + u * t) - np.sin(th)),
+            y - v / u * (np.cos(th + u * t) - np.cos(th)), th + u * t)
+
+
+def _plant(robots, robot=None, sent=None):
+    from firmware_sim.sitl_plant import SitlPlant
     from firmware_sim.world import Obstacles
+
+    return SitlPlant(robots, robot or RobotParams(),
+                     Obstacles(np.array([[1.0, -1.0]]), np.array([0.5])), 2.0,
+                     lambda kind, rid, data: None if sent is None else sent.append(
+                         (kind, rid, data)))
+
+
+def test_sitl_plant_moves_each_robot_along_its_wheels_arc():
+    """Straight, turning on the spot, turning while driving, and a robot whose drivers are
+    heard from late: each pose is the closed-form unicycle motion of its wheel speeds."""
+    from agent.kinematics import TWO_PI, body_velocity, wrap_scalar
+    from firmware_sim.sitl_plant import PlantRobot
     from transport.payloads import ObstaclesMsg, TruthMsg
 
     robot = RobotParams()
-    speeds = [(2.0, 2.0), (3.0, -1.0), (0.5, 1.5), (1.0, 2.0)]
-    robots = [PlantRobot(i + 1, (float(i), float(-i), 3.0 - i), _Wheels(*s, silent=5 * (i == 3)))
-              for i, s in enumerate(speeds)]
-    odometry = [Odometry(robot.wheel_radius, robot.wheel_base, rb.pose) for rb in robots]
-    sent = []
-    plant = SitlPlant(robots, robot, Obstacles(np.array([[1.0, -1.0]]), np.array([0.5])), 2.0,
-                      lambda kind, rid, data: sent.append((kind, rid, data)))
-    for k in range(40):
-        plant.step(0.005, 0.005 * k, 100.0 + 0.005 * k)
-        for rb, odo in zip(robots, odometry):
-            state = rb.drivers.wheel_state()
-            if state is not None:
-                odo.update(*state[:2])
-                v, u = body_velocity(TWO_PI * state[2], TWO_PI * state[3], robot.wheel_radius,
-                                     robot.wheel_base)
-                assert (rb.v, rb.u) == (v, u)
-            assert rb.pose == odo.pose                         # the same arcs, to the bit
-    assert robots[3].pose != (3.0, -3.0, 0.0) and robots[3].drivers.k > 5
+    speeds = [(2.0, 2.0), (3.0, -3.0), (0.5, 1.5), (1.0, 2.0)]
+    starts = [(float(i), float(-i), 3.0 - i) for i in range(4)]
+    robots = [PlantRobot(i + 1, start, _Wheels(*s, silent=5 * (i == 3)))
+              for i, (start, s) in enumerate(zip(starts, speeds))]
+    sent: list = []
+    plant = _plant(robots, robot, sent)
+    dt, steps = 0.005, 40
+    for k in range(steps):
+        plant.step(dt, dt * k, 100.0 + dt * k)
+    for rb, start, (right, left) in zip(robots, starts, speeds):
+        v, u = body_velocity(TWO_PI * right, TWO_PI * left, robot.wheel_radius,
+                             robot.wheel_base)
+        assert (rb.v, rb.u) == (v, u)
+        moving = dt * (steps - rb.drivers.silent)
+        x, y, th = _arc(start, v, u, moving)
+        assert rb.pose[:2] == pytest.approx((x, y), abs=1e-12)
+        assert rb.pose[2] == pytest.approx(wrap_scalar(th), abs=1e-12)
+    assert robots[1].pose[:2] == pytest.approx(starts[1][:2], abs=1e-12)   # on the spot
     truth = [TruthMsg.decode(d) for kind, _, d in sent if kind == "truth"]
-    assert len(truth) == 20 * 4 and [t.robot_id for t in truth[-4:]] == [1, 2, 3, 4]
+    assert len(truth) == steps // 2 * 4 and [t.robot_id for t in truth[-4:]] == [1, 2, 3, 4]
     assert (truth[-1].x, truth[-1].y, truth[-1].theta) == robots[3].pose
     obstacles = [ObstaclesMsg.decode(d) for kind, _, d in sent if kind == "obstacles"]
     assert len(obstacles) == 2 * 4                                  # 10 Hz over 0.2 s
+
+
+class _NoBus:
+    """A CAN bus on which nothing arrives and whatever is sent vanishes."""
+
+    def fileno(self):
+        raise NotImplementedError
+
+    def recv(self, timeout=None):
+        return None
+
+    def send(self, msg):
+        pass
+
+    def shutdown(self):
+        pass
+
+
+def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch_plant():
+    """From rest, the emulated drivers ramp to their set-points: the robot moves as the batch
+    simulator's wheels plant moves it for the same wheel set-points (the ramped speed at
+    each step's end, held over the step), while the drivers' encoders, integrating each
+    step's mean speed, lag behind the truth by half a step of the speed reached."""
+    from agent.kinematics import TWO_PI, body_velocity
+    from firmware_sim.odrive_sim import DriverPair
+    from firmware_sim.sitl_plant import PlantRobot
+    from transport.odrive_frames import AxisState
+
+    robot = RobotParams(wheel_ramp=100.0)
+    right, left = 3.0, 1.0                                  # rev/s, reached after 30 ms
+    drivers = DriverPair(_NoBus())
+    drivers.configure(ramp=robot.wheel_ramp, vel_limit=robot.wheel_speed_limit, watchdog=0.0)
+    for node, target in ((drivers.right_node, right), (drivers.left_node, left)):
+        drivers.axes[node].request_state(AxisState.CLOSED_LOOP_CONTROL)
+        drivers.axes[node].input_vel(target)
+    start = (1.0, 2.0, 0.5)
+    rb = PlantRobot(1, start, drivers)
+    plant = _plant([rb], robot)
+    batch = WheelPlant(robot, 1)
+    v_cmd, u_cmd = body_velocity(TWO_PI * right, TWO_PI * left, robot.wheel_radius,
+                                 robot.wheel_base)
+    pose = np.array([start])
+    turns = np.zeros(2)                                     # the truth's wheel turns [rev]
+    dt = 0.005
+    for k in range(20):
+        plant.step(dt, dt * k, 100.0 + dt * k)
+        pose, v, u = batch.step(pose, np.array([v_cmd]), np.array([u_cmd]), dt)
+        turns += batch.wheel_rev_s[0] * dt
+        assert (rb.v, rb.u) == pytest.approx((v[0], u[0]), abs=1e-12)
+        assert rb.pose == pytest.approx(tuple(pose[0]), abs=1e-12)
+    assert batch.wheel_rev_s[0] == pytest.approx([right, left])       # the ramp is over
+    encoders = drivers.wheel_state()[:2]
+    assert encoders == pytest.approx(tuple(turns - 0.5 * dt * np.array([right, left])),
+                                     abs=1e-12)
+
+
+def test_sitl_plant_truth_is_independent_of_the_encoders_and_of_odometry():
+    """Encoders that misread the turns (one 3 % long, one 1 % short) make the agent's
+    odometry drift; the plant's truth is the motion the wheels really made."""
+    from agent.kinematics import TWO_PI, body_velocity
+    from agent.odometry import Odometry
+    from firmware_sim.sitl_plant import PlantRobot
+
+    robot = RobotParams()
+    start, (right, left) = (0.0, 0.0, 0.0), (2.0, 1.0)
+    rb = PlantRobot(1, start, _Wheels(right, left, encoder_gain=(1.03, 0.99)))
+    odometry = Odometry(robot.wheel_radius, robot.wheel_base, start)
+    odometry.update(*rb.drivers.pos)                        # the encoders' origin
+    plant = _plant([rb], robot)
+    dt, steps = 0.005, 200
+    for k in range(steps):
+        plant.step(dt, dt * k, 100.0 + dt * k)
+        odometry.update(*rb.drivers.wheel_state()[:2])
+    v, u = body_velocity(TWO_PI * right, TWO_PI * left, robot.wheel_radius, robot.wheel_base)
+    truth = _arc(start, v, u, dt * steps)
+    assert rb.pose[:2] == pytest.approx(truth[:2], abs=1e-12)
+    assert np.hypot(odometry.pose[0] - truth[0], odometry.pose[1] - truth[1]) > 0.05
+
+
+def test_sitl_plant_does_not_import_the_agents_estimator():
+    import ast
+    from pathlib import Path
+
+    from firmware_sim import sitl_plant
+
+    tree = ast.parse(Path(sitl_plant.__file__).read_text())
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert "agent.odometry" not in imported
 
 
 def test_sitl_plant_reads_only_the_buses_with_frames_waiting():

@@ -1,4 +1,7 @@
-"""MAVLink 2 message signing: the key file and the check of incoming frames; no I/O.
+"""MAVLink 2 message signing: the key file and the check of incoming frames.
+
+Reading the key file (:func:`load_signing_key`) is the module's only I/O; the check works on
+frames handed in, with the time passed in.
 
 Outgoing frames are signed by pymavlink's encoder (``MAVLink.signing``). Incoming frames are
 checked here, on the raw frame, rather than by pymavlink's decoder, for two reasons:

@@ -2,8 +2,10 @@
 
 The DBC (``transport/odrive.dbc``) is the one source of truth for layouts, units, value
 tables and cycle times; this module builds python-can messages from it and decodes them, at
-both ends (the agent's host side and the emulated firmware). No byte is packed by hand: the
-two frames of the steady flow use a struct derived from, and checked against, the DBC.
+both ends (the agent's host side and the emulated firmware). cantools encodes and decodes
+every frame but the two of the steady flow (Get_Encoder_Estimates and Set_Input_Vel): those
+are packed and unpacked with a ``struct`` built from their DBC layout and checked against it
+at import, so their layout still comes from the DBC alone.
 
 Node ids: arbitration id = node_id << 5 | cmd_id. The DBC lists every message for nodes 0
 and 1 (so ``cantools decode`` reads a capture of a default robot); this module uses the
