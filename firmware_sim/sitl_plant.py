@@ -7,9 +7,9 @@ faults), integrated exactly as an arc by :func:`agent.kinematics.arc_step`, the 
 simulator's integrator.
 
 Integration rule: over a step of ``dt`` the wheels turn at the speed the drivers reached at
-the step's end (after advancing their ramp by ``dt``), held over the whole step, as
-:class:`firmware_sim.plant.WheelPlant` holds its ramped wheel speeds: given the same wheel
-set-points both plants move a robot alike, to rounding.
+the step's end (after advancing their ramp by ``dt``), held over the whole step, as the batch
+simulator's wheels plant (:func:`firmware_sim.swarm_step.advance`) holds its ramped wheel
+speeds: given the same wheel set-points both plants move a robot alike, to rounding.
 
 The truth never depends on what the robot measures or believes: the encoder positions,
 which the agent's odometry integrates, are not read. The drivers integrate their encoders

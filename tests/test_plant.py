@@ -53,7 +53,7 @@ def _plant(robots, robot=None, sent=None):
 def test_sitl_plant_moves_each_robot_along_its_wheels_arc():
     """Straight, turning on the spot, turning while driving, and a robot whose drivers are
     heard from late: each pose is the closed-form unicycle motion of its wheel speeds."""
-    from agent.kinematics import TWO_PI, body_velocity, wrap_scalar
+    from agent.kinematics import TWO_PI, body_velocity, wrap_angle
     from firmware_sim.sitl_plant import PlantRobot
     from transport.payloads import ObstaclesMsg, TruthMsg
 
@@ -74,7 +74,7 @@ def test_sitl_plant_moves_each_robot_along_its_wheels_arc():
         moving = dt * (steps - rb.drivers.silent)
         x, y, th = _arc(start, v, u, moving)
         assert rb.pose[:2] == pytest.approx((x, y), abs=1e-12)
-        assert rb.pose[2] == pytest.approx(wrap_scalar(th), abs=1e-12)
+        assert rb.pose[2] == pytest.approx(wrap_angle(th), abs=1e-12)
     assert robots[1].pose[:2] == pytest.approx(starts[1][:2], abs=1e-12)   # on the spot
     truth = [TruthMsg.decode(d) for kind, _, d in sent if kind == "truth"]
     assert len(truth) == steps // 2 * 4 and [t.robot_id for t in truth[-4:]] == [1, 2, 3, 4]
@@ -107,6 +107,7 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
     from agent.kinematics import TWO_PI, body_velocity
     from firmware_sim.odrive_sim import DriverPair
     from firmware_sim.sitl_plant import PlantRobot
+    from firmware_sim.swarm_step import advance
     from transport.odrive_frames import AxisState
 
     robot = RobotParams(wheel_ramp=100.0)
@@ -119,19 +120,23 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
     start = (1.0, 2.0, 0.5)
     rb = PlantRobot(1, start, drivers)
     plant = _plant([rb], robot)
-    batch = WheelPlant(robot, 1)
     v_cmd, u_cmd = body_velocity(TWO_PI * right, TWO_PI * left, robot.wheel_radius,
                                  robot.wheel_base)
     pose = np.array([start])
+    wheels = np.zeros((1, 2))                               # the batch plant's wheels [rev/s]
     turns = np.zeros(2)                                     # the truth's wheel turns [rev]
     dt = 0.005
     for k in range(20):
         plant.step(dt, dt * k, 100.0 + dt * k)
-        pose, v, u = batch.step(pose, np.array([v_cmd]), np.array([u_cmd]), dt)
-        turns += batch.wheel_rev_s[0] * dt
-        assert (rb.v, rb.u) == pytest.approx((v[0], u[0]), abs=1e-12)
+        advance(pose, np.array([[v_cmd, u_cmd, 0.0]]), wheels, False, robot.wheel_radius,
+                robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1,
+                np.zeros((2, 1, 2)))
+        turns += wheels[0] * dt
+        v, u = body_velocity(TWO_PI * wheels[0, 0], TWO_PI * wheels[0, 1], robot.wheel_radius,
+                             robot.wheel_base)
+        assert (rb.v, rb.u) == pytest.approx((v, u), abs=1e-12)
         assert rb.pose == pytest.approx(tuple(pose[0]), abs=1e-12)
-    assert batch.wheel_rev_s[0] == pytest.approx([right, left])       # the ramp is over
+    assert wheels[0] == pytest.approx([right, left])                  # the ramp is over
     encoders = drivers.wheel_state()[:2]
     assert encoders == pytest.approx(tuple(turns - 0.5 * dt * np.array([right, left])),
                                      abs=1e-12)
