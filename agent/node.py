@@ -17,7 +17,7 @@ disarmed means no command at all. A failsafe is sticky: it takes a new FORMATION
 """
 from __future__ import annotations
 
-import enum
+import dataclasses
 import logging
 import math
 from collections import deque
@@ -26,27 +26,24 @@ from typing import Mapping
 
 import numpy as np
 
+from agent.config import CONTROL_PARAMS
 from agent.formation import Formation
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
-from common.vocabulary import Mode
 from agent.law_single import SingleMemory, single_step
 from agent.loop import Clock
 from agent.neighbours import in_range
 from agent.odometry import Odometry
-from agent.ports import MotorPort, SwarmPort, WheelFeedback
 from agent.settings import AgentSettings
-from transport.payloads import MissionMsg, ObstaclesMsg, Received, StateFlags, StateMsg
+from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
+from common.ports import MotorPort, SwarmPort
+from common.schema import ConfigError, Param
+from common.vocabulary import AgentMode, Mode, StateFlags, WheelFeedback
 
 log = logging.getLogger(__name__)
 
 
 ARM_RETRY = 0.25   # s between repeated arm requests while the drivers have not answered
-
-
-class AgentMode(enum.Enum):
-    DISARMED = "DISARMED"
-    HOLD = "HOLD"
-    FORMATION = "FORMATION"
+_PARAMS: dict[str, Param] = {p.name: p for p in CONTROL_PARAMS}
 
 
 @dataclass
@@ -123,6 +120,28 @@ class Agent:
             self._last_law = None
         return None
 
+    # --- parameters (from a ground station, between two ticks) --------------------------
+    def param(self, name: str) -> float:
+        """The value of runtime parameter ``name`` (agent.config.CONTROL_PARAMS)."""
+        return float(getattr(self.s.control, _PARAMS[name].field))
+
+    def set_param(self, name: str, value: float) -> str | None:
+        """Set runtime parameter ``name``; validated by the settings schema, in force from
+        the next period. Returns why it was refused (the old value stays), or None. This is
+        the only way the agent's settings change after start."""
+        spec = _PARAMS.get(name)
+        if spec is None:
+            return f"no parameter {name}"
+        if spec.read_only is not None:
+            return f"{name} is {spec.read_only}"
+        try:
+            control = dataclasses.replace(self.s.control, **{spec.field: float(value)})
+            self.s = dataclasses.replace(self.s, control=control)
+        except ConfigError as exc:
+            return f"{name} = {value:g} refused: {exc}"
+        log.info("robot %d: %s = %g", self.s.robot_id, name, self.param(name))
+        return None
+
     # --- the loop body ----------------------------------------------------------------------
     def tick(self, k: int = 0, deadline: float = 0.0) -> None:
         now_m, now_w = self.clock.monotonic(), self.clock.wall()
@@ -173,16 +192,16 @@ class Agent:
         report closed loop; only a driver error, or ``arm_timeout`` without success, is a
         failsafe then."""
         reason = None
-        fresh = fb is not None and fb.age <= self.s.feedback_timeout
+        fresh = fb is not None and fb.age <= self.s.timeouts.feedback
         if fresh and fb.errors:
             reason = "driver error: " + ", ".join(fb.errors)
         elif self._arming:
             if fresh and fb.closed_loop:
                 self._arming = False
                 log.info("robot %d: both drivers in closed loop", self.s.robot_id)
-            elif now_m - self._armed_at > self.s.arm_timeout:
+            elif now_m - self._armed_at > self.s.timeouts.arm:
                 self._arming = False
-                reason = (f"drivers not armed within {self.s.arm_timeout:g} s"
+                reason = (f"drivers not armed within {self.s.timeouts.arm:g} s"
                           + ("" if fresh else " (no feedback)"))
             elif now_m - self._arm_sent >= ARM_RETRY:
                 self.motor.arm()
@@ -239,7 +258,7 @@ class Agent:
         their last position."""
         me = self.s.robot_id
         near = in_range((r.msg for rid, r in neighbours.items() if rid != me),
-                        pose[0], pose[1], now_w, self.s.staleness, self.s.sensing_range)
+                        pose[0], pose[1], now_w, self.s.timeouts.staleness, self.s.sensing_range)
         self.counters.neighbour_age.extend(near.ages)
         obstacles = ([(x, y, r) for (x, y), r in zip(obs.centers.tolist(), obs.radii.tolist())]
                      if obs is not None else [])

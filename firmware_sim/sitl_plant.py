@@ -21,7 +21,7 @@ from agent.config import RobotParams
 from agent.kinematics import TWO_PI, body_velocity
 from agent.odometry import Odometry
 from firmware_sim.world import Obstacles
-from transport.payloads import ObstaclesMsg, TruthMsg
+from common.payloads import ObstaclesMsg, TruthMsg
 
 log = logging.getLogger(__name__)
 

@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from hil.processes import wait_until
 from hil.recorder import ENCODERS, Recorder, read_messages
-from transport.payloads import (MissionMsg, ObstaclesMsg, PayloadError, StateFlags, StateMsg,
-                                TruthMsg, WheelsMsg)
+from common.payloads import MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg, WheelsMsg
+from common.vocabulary import StateFlags
 from transport.zenoh_link import Keys, open_session, session_config
 
 

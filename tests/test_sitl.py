@@ -19,7 +19,7 @@ import zenoh
 from firmware_sim.batch import SimOptions, simulate
 from hil.run_folder import read_run
 from hil.scenario import load_scenario
-from transport.payloads import MissionMsg
+from common.payloads import MissionMsg
 from procs import alive
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -2,7 +2,7 @@
 
 Key space (prefix ``boundswarm/<swarm>``)::
 
-    robot/<id>/state       agent state every period (transport.payloads.StateMsg)
+    robot/<id>/state       agent state every period (common.payloads.StateMsg)
     robot/<id>/beacon      the same state at a low rate (5 Hz), for robots far away
     robot/<id>             liveliness token while the agent runs
     robot/<id>/obstacles   obstacle detections for that robot (ObstaclesMsg)
@@ -33,7 +33,7 @@ from typing import Callable, Generic, Iterable, Mapping, TypeVar
 
 import zenoh
 
-from transport.payloads import (MissionMsg, ObstaclesMsg, PayloadError, Received,
+from common.payloads import (MissionMsg, ObstaclesMsg, PayloadError, Received,
                                 StateMsg)
 
 log = logging.getLogger(__name__)
