@@ -92,7 +92,7 @@ class Agent:
     def arm(self) -> None:
         """Clear the drivers' errors and request closed loop (an explicit request); the
         request alone is repeated until both drivers report it (they may boot after the
-        robot computer), for at most ``arm_timeout``."""
+        robot computer), for at most ``[timeouts] arm``."""
         self.motor.clear_errors()
         self.motor.arm()
         self.failsafe = None
@@ -189,7 +189,7 @@ class Agent:
         """Failsafe on lost feedback, a driver error, or drivers that leave closed loop.
 
         While arming, the arm request is repeated every ``ARM_RETRY`` s until both drivers
-        report closed loop; only a driver error, or ``arm_timeout`` without success, is a
+        report closed loop; only a driver error, or ``[timeouts] arm`` without success, is a
         failsafe then."""
         reason = None
         fresh = fb is not None and fb.age <= self.s.timeouts.feedback

@@ -24,8 +24,7 @@ from common.vocabulary import AgentMode
 from transport.canbus import open_bus
 from transport.mavlink_link import VehicleState, open_link
 from transport.wheel_drivers import WheelDrivers
-from transport.zenoh_link import (Keys, SwarmLink, config_from_file, open_session,
-                                  session_config)
+from transport.zenoh_link import Keys, SwarmLink, config_from_file, open_session, session_config
 
 log = logging.getLogger(__name__)
 

@@ -20,8 +20,8 @@ import numpy as np
 from agent.config import RobotParams
 from agent.kinematics import TWO_PI, body_velocity
 from agent.odometry import Odometry
-from firmware_sim.world import Obstacles
 from common.payloads import ObstaclesMsg, TruthMsg
+from firmware_sim.world import Obstacles
 
 log = logging.getLogger(__name__)
 

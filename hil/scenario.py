@@ -27,6 +27,7 @@ from common.schema import ConfigError, TableReader, from_table, load_toml
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles
 
+
 class ScenarioError(ValueError):
     """A scenario file is unreadable, or a field in it is missing or wrong."""
 

@@ -1,6 +1,7 @@
 """The agent's read -> update -> write over in-memory ports, on simulated time."""
 import numpy as np
 import pytest
+from fakes import MirrorMotor, SharedSwarm, SimClock
 
 from agent.config import ControlParams
 from agent.loop import FixedRateLoop
@@ -8,7 +9,6 @@ from agent.node import Agent
 from agent.settings import AgentSettings
 from common.payloads import MissionMsg, ObstaclesMsg
 from common.vocabulary import AgentMode, Mode, StateFlags
-from fakes import MirrorMotor, SharedSwarm, SimClock
 
 
 def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in=0.0):

@@ -1,10 +1,15 @@
-import pytest
-
 import argparse
 import dataclasses
 
-from agent.config import (CONTROL_PARAMS, ControlParams, RobotParams, braking_margin,
-                          check_braking_margin)
+import pytest
+
+from agent.config import (
+    CONTROL_PARAMS,
+    ControlParams,
+    RobotParams,
+    braking_margin,
+    check_braking_margin,
+)
 from common.schema import ConfigError, add_arguments, fields, from_table, section_from_args
 
 

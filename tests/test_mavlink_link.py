@@ -36,13 +36,13 @@ from transport.mavlink_link import (
     open_link,
     wrap_pi,
 )
+from transport.mavlink_params import ParamTable
 from transport.mavlink_signing import (
     SignatureCheck,
     Verdict,
     load_signing_key,
     signing_timestamp,
 )
-from transport.mavlink_params import ParamTable
 from transport.settings import MavlinkSettings
 
 ROBOT = 7

@@ -57,9 +57,9 @@ class _Wheels:
 def test_sitl_plant_rolls_each_robot_as_its_odometry_would():
     from agent.kinematics import TWO_PI, body_velocity
     from agent.odometry import Odometry
+    from common.payloads import ObstaclesMsg, TruthMsg
     from firmware_sim.sitl_plant import PlantRobot, SitlPlant
     from firmware_sim.world import Obstacles
-    from common.payloads import ObstaclesMsg, TruthMsg
 
     robot = RobotParams()
     speeds = [(2.0, 2.0), (3.0, -1.0), (0.5, 1.5), (1.0, 2.0)]

@@ -1,3 +1,4 @@
+import argparse
 import logging
 import os
 import subprocess
@@ -12,7 +13,7 @@ from hypothesis import strategies as st
 from agent import loop
 from agent.config import ControlParams, RobotParams
 from agent.settings import AgentSettings, SensingSettings, TimeoutSettings, load_settings
-from common.schema import ConfigError, from_table, to_toml
+from common.schema import ConfigError, add_arguments, from_table, section_from_args, to_toml
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 
 BASE = {"robot_id": 3, "swarm": "demo", "initial_pose": [1.0, 2.0, 0.5]}
@@ -127,6 +128,33 @@ def test_missing_relative_files_are_named(tmp_path):
                                           mavlink=MavlinkSettings(signing_key_file="k.key"))))
     with pytest.raises(ConfigError, match=r"robot.toml: \[mavlink\] signing_key_file: no such"):
         load_settings(path)
+
+
+def test_command_line_flags_derived_from_the_whole_config():
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, AgentSettings)
+    with pytest.raises(SystemExit):                      # robot_id, swarm, pose are required
+        parser.parse_args([])
+    required = ["--robot-id", "4", "--swarm", "s", "--initial-pose", "1", "2", "0.5"]
+    assert section_from_args(AgentSettings, parser.parse_args(required)) == AgentSettings(
+        robot_id=4, swarm="s", initial_pose=(1.0, 2.0, 0.5))
+    args = parser.parse_args(required + [
+        "--autostart", "--control-K", "2", "--can-port", "43001", "--zenoh-mode", "peer",
+        "--zenoh-connect", "--zenoh-listen", "tcp/127.0.0.1:1", "tcp/127.0.0.1:2",
+        "--timeouts-arm", "3", "--mavlink-gcs-failsafe", "--sensing-range", "9"])
+    s = section_from_args(AgentSettings, args)
+    assert s.autostart and s.control.K == 2.0 and s.can.port == 43001
+    assert s.zenoh == ZenohSettings(mode="peer", connect=(),
+                                    listen=("tcp/127.0.0.1:1", "tcp/127.0.0.1:2"))
+    assert s.timeouts.arm == 3.0 and s.mavlink.gcs_failsafe and s.sensing_range == 9.0
+    text = parser.format_help()
+    assert "--can-channel" in text and "ff11::b5:1" in text and "[rev/s]" in text
+    with pytest.raises(SystemExit):
+        parser.parse_args(required + ["--zenoh-mode", "router"])    # choices from the schema
+    with pytest.raises(ConfigError, match=r"--can-bitrate: must be >= 10000 \[bit/s\]"):
+        section_from_args(AgentSettings, parser.parse_args(required + ["--can-bitrate", "9"]))
+    with pytest.raises(ConfigError, match=r"--control: ControlParams: need 0 < a < b < c"):
+        section_from_args(AgentSettings, parser.parse_args(required + ["--control-b", "9"]))
 
 
 # --- realtime scheduling, granted or not ------------------------------------------------

@@ -98,8 +98,8 @@ def test_unreachable_router_is_a_clear_error():
 def test_swarm_link_between_two_agents_and_a_recording(sessions, tmp_path):
     import numpy as np
 
-    from hil.recorder import Recorder, read_messages
     from common.payloads import MissionMsg, ObstaclesMsg
+    from hil.recorder import Recorder, read_messages
     from transport.zenoh_link import SwarmLink
 
     a, b = sessions

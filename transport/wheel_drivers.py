@@ -19,8 +19,15 @@ import can
 
 from common import drivers
 from common.vocabulary import WheelFeedback
-from transport.odrive_frames import (AxisState, Cmd, ControlMode, InputMode, encode, error_names,
-                                     receive)
+from transport.odrive_frames import (
+    AxisState,
+    Cmd,
+    ControlMode,
+    InputMode,
+    encode,
+    error_names,
+    receive,
+)
 
 log = logging.getLogger(__name__)
 
