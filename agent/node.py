@@ -73,15 +73,16 @@ class Agent:
         self.mode = AgentMode.DISARMED
         self.failsafe: str | None = None
         self.odometry = Odometry(settings.robot.wheel_radius, settings.robot.wheel_base,
-                                 tuple(settings.initial_pose))
+                                 settings.initial_pose)
         self.memory = SingleMemory()
         self.counters = AgentCounters()
         self.last_feedback: WheelFeedback | None = None
         self.command = (0.0, 0.0)          # (v [m/s], u [rad/s]) after saturation
         self.law_mode = Mode.TRACK
-        self.reference = tuple(map(float, settings.initial_pose[:2]))   # m
+        x0, y0, _ = settings.initial_pose
+        self.reference = (float(x0), float(y0))   # m
         self._seq = 0
-        self._last_law = None              # monotonic time of the last law step
+        self._last_law: float | None = None     # monotonic time of the last law step
         self._mission_key: tuple | None = None
         self._formation: Formation | None = None
         self._armed_at = -math.inf         # monotonic time of the last arm request
@@ -192,23 +193,23 @@ class Agent:
         report closed loop; only a driver error, or ``[timeouts] arm`` without success, is a
         failsafe then."""
         reason = None
-        fresh = fb is not None and fb.age <= self.s.timeouts.feedback
-        if fresh and fb.errors:
-            reason = "driver error: " + ", ".join(fb.errors)
+        fresh = fb if fb is not None and fb.age <= self.s.timeouts.feedback else None
+        if fresh is not None and fresh.errors:
+            reason = "driver error: " + ", ".join(fresh.errors)
         elif self._arming:
-            if fresh and fb.closed_loop:
+            if fresh is not None and fresh.closed_loop:
                 self._arming = False
                 log.info("robot %d: both drivers in closed loop", self.s.robot_id)
             elif now_m - self._armed_at > self.s.timeouts.arm:
                 self._arming = False
                 reason = (f"drivers not armed within {self.s.timeouts.arm:g} s"
-                          + ("" if fresh else " (no feedback)"))
+                          + ("" if fresh is not None else " (no feedback)"))
             elif now_m - self._arm_sent >= ARM_RETRY:
                 self.motor.arm()
                 self._arm_sent = now_m
-        elif not fresh:
+        elif fresh is None:
             reason = "driver feedback lost"
-        elif not fb.closed_loop:
+        elif not fresh.closed_loop:
             reason = "drivers not in closed loop control"
         if reason and self.failsafe is None:
             self.failsafe = reason

@@ -238,7 +238,7 @@ class MavlinkLink:
             state = self.vehicle.state()
             self._start, self._last_gcs, self._last = now, now, state
             self._home = (state.y, state.x)
-        if self._check is not None:
+        if self._check is not None and self._wall is not None:
             self._tx.signing.timestamp = max(self._tx.signing.timestamp,
                                              signing_timestamp(self._wall()))
         self._receive(now)
@@ -431,6 +431,8 @@ class MavlinkLink:
     # --- events -------------------------------------------------------------------------
     def _report_changes(self, state: VehicleState) -> None:
         last, self._last = self._last, state
+        if last is None:
+            return
         if state.mode is not last.mode:
             if state.mode is AgentMode.DISARMED:
                 self._statustext(mav2.MAV_SEVERITY_NOTICE, "disarmed")
