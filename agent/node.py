@@ -22,7 +22,7 @@ import logging
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
@@ -33,11 +33,13 @@ from agent.law_single import SingleMemory, single_step
 from agent.loop import Clock
 from agent.neighbours import in_range
 from agent.odometry import Odometry
-from agent.settings import AgentSettings
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import MotorPort, SwarmPort
 from common.schema import ConfigError, Param
 from common.vocabulary import AgentMode, Mode, StateFlags, WheelFeedback
+
+if TYPE_CHECKING:               # the config reader knows the links' settings: not loaded here
+    from agent.settings import AgentSettings
 
 log = logging.getLogger(__name__)
 

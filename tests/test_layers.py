@@ -13,7 +13,11 @@ and no cycle between the packages.
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("common", "agent", "transport", "firmware_sim", "hil")
@@ -73,6 +77,24 @@ def violations(root: Path) -> list[str]:
 
 def test_the_source_tree_keeps_its_layers():
     assert violations(ROOT) == []
+
+
+@pytest.mark.parametrize("module, forbidden", [
+    ("agent.node", ("transport", "firmware_sim", "hil")),         # testable without links
+    ("transport.mavlink_link", ("agent", "firmware_sim", "hil")),  # testable without agent
+    ("transport.zenoh_link", ("agent", "firmware_sim", "hil")),
+    ("transport.wheel_drivers", ("agent", "firmware_sim", "hil")),
+    ("common.ports", ("agent", "transport", "firmware_sim", "hil")),
+    ("common.schema", ("agent", "transport", "firmware_sim", "hil")),
+])
+def test_loading_a_module_loads_no_higher_layer(module, forbidden):
+    """At run time too (what the module's imports load in turn, in a fresh interpreter)."""
+    code = (f"import sys, {module}; print(sorted({{m.split('.')[0] for m in sys.modules}} "
+            f"& {set(forbidden)!r}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
 
 
 def _tree(tmp_path: Path, modules: dict[str, str]) -> Path:
