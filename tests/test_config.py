@@ -52,12 +52,12 @@ def test_from_table_refuses_unknown_and_non_numbers():
     assert from_table(ControlParams, {"K": 2}, "t").K == 2.0
 
 
-def test_braking_margin_matches_design():
+def test_braking_margin_matches_the_specification():
     fast = braking_margin(ControlParams(), RobotParams())
     assert fast.ok and fast.v_max == 12.0
     assert fast.reaction == pytest.approx(0.24)
     slow_ramp = braking_margin(ControlParams(), RobotParams(wheel_ramp=200.0))
-    assert not slow_ramp.ok                          # DESIGN: 200 rev/s^2 already breaks it
+    assert not slow_ramp.ok               # docs/controller.md: 200 rev/s^2 already breaks it
     with pytest.raises(ConfigError, match="braking margin"):
         check_braking_margin(ControlParams(), RobotParams(wheel_ramp=200.0), strict=True)
     # stale neighbour data eats the margin too
