@@ -116,11 +116,16 @@ def _resolve(cls: type) -> tuple[FieldInfo, ...]:
 
 
 # --- values -----------------------------------------------------------------------------
+def _show(value: Any) -> str:
+    """``value`` as messages show it: sequences as TOML lists."""
+    return repr(list(value)) if isinstance(value, tuple) else repr(value)
+
+
 def _number_problem(value: Any) -> str | None:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return f"expected a number, got {value!r}"
+        return f"expected a number, got {_show(value)}"
     if not math.isfinite(value):
-        return f"must be finite, got {value!r}"
+        return f"must be finite, got {_show(value)}"
     return None
 
 
@@ -128,9 +133,9 @@ def _bounds_problem(f: FieldInfo, value: float) -> str | None:
     lo, hi, unit = f.meta.get("lo"), f.meta.get("hi"), f" [{f.unit}]" if f.unit else ""
     if lo is not None and (value < lo or (f.meta.get("open_lo") and value == lo)):
         rel = ">" if f.meta.get("open_lo") else ">="
-        return f"must be {rel} {lo:g}{unit}, got {value!r}"
+        return f"must be {rel} {lo:g}{unit}, got {_show(value)}"
     if hi is not None and value > hi:
-        return f"must be <= {hi:g}{unit}, got {value!r}"
+        return f"must be <= {hi:g}{unit}, got {_show(value)}"
     return None
 
 
@@ -140,33 +145,33 @@ def _problem(f: FieldInfo, value: Any) -> str | None:
         return None if f.optional else "missing"
     tp = f.type
     if tp is bool:
-        return None if isinstance(value, bool) else f"expected true or false, got {value!r}"
+        return None if isinstance(value, bool) else f"expected true or false, got {_show(value)}"
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            return f"expected an integer, got {value!r}"
+            return f"expected an integer, got {_show(value)}"
         return _bounds_problem(f, value)
     if tp is float:
         return _number_problem(value) or _bounds_problem(f, value)
     if tp is str:
         if not isinstance(value, str) or not value:
-            return f"expected a non-empty string, got {value!r}"
+            return f"expected a non-empty string, got {_show(value)}"
         choices = f.meta.get("choices")
         if choices and value not in choices:
-            return f"expected {' or '.join(choices)}, got {value!r}"
+            return f"expected {' or '.join(choices)}, got {_show(value)}"
         return None
     if typing.get_origin(tp) is tuple:
         args = typing.get_args(tp)
         if len(args) == 2 and args[1] is Ellipsis:
             if not isinstance(value, tuple) or not all(isinstance(x, str) and x
                                                        for x in value):
-                return f"expected a list of strings, got {value!r}"
+                return f"expected a list of strings, got {_show(value)}"
             return None
         if not isinstance(value, tuple) or len(value) != len(args) or any(
                 _number_problem(x) for x in value):
-            return f"expected a list of {len(args)} finite numbers, got {value!r}"
+            return f"expected a list of {len(args)} finite numbers, got {_show(value)}"
         return None
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):
-        return None if isinstance(value, tp) else f"expected a {tp.__name__}, got {value!r}"
+        return None if isinstance(value, tp) else f"expected a {tp.__name__}, got {_show(value)}"
     raise TypeError(f"field {f.name}: unsupported type {tp!r}")
 
 
@@ -185,7 +190,8 @@ def _from_toml(f: FieldInfo, value: Any) -> Any:
         value = tuple(value)
     if f.type is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
-    if isinstance(value, tuple) and typing.get_args(f.type)[-1] is float:
+    if isinstance(value, tuple) and typing.get_origin(f.type) is tuple \
+            and typing.get_args(f.type)[-1] is float:
         return tuple(float(x) if isinstance(x, int) and not isinstance(x, bool) else x
                      for x in value)
     return value
