@@ -20,7 +20,7 @@ from agent.kinematics import arc_step
 
 
 class NeighbourState(Protocol):
-    """What a neighbour reports (transport.payloads.StateMsg has it)."""
+    """What a neighbour reports (common.payloads.StateMsg has it)."""
 
     stamp: float    # s, UNIX time
     x: float        # m

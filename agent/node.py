@@ -17,36 +17,35 @@ disarmed means no command at all. A failsafe is sticky: it takes a new FORMATION
 """
 from __future__ import annotations
 
-import enum
+import dataclasses
 import logging
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
+from agent.config import CONTROL_PARAMS
 from agent.formation import Formation
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
-from common.vocabulary import Mode
 from agent.law import LawMemory, LawParams, law_step
 from agent.loop import Clock
 from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry
-from agent.ports import MotorPort, SwarmPort, WheelFeedback
-from agent.settings import AgentSettings
-from transport.payloads import MissionMsg, ObstaclesMsg, Received, StateFlags, StateMsg
+from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
+from common.ports import MotorPort, SwarmPort
+from common.schema import ConfigError, Param
+from common.vocabulary import AgentMode, Mode, StateFlags, WheelFeedback
+
+if TYPE_CHECKING:               # the config reader knows the links' settings: not loaded here
+    from agent.settings import AgentSettings
 
 log = logging.getLogger(__name__)
 
 
 ARM_RETRY = 0.25   # s between repeated arm requests while the drivers have not answered
-
-
-class AgentMode(enum.Enum):
-    DISARMED = "DISARMED"
-    HOLD = "HOLD"
-    FORMATION = "FORMATION"
+_PARAMS: dict[str, Param] = {p.name: p for p in CONTROL_PARAMS}
 
 
 @dataclass
@@ -76,15 +75,16 @@ class Agent:
         self.mode = AgentMode.DISARMED
         self.failsafe: str | None = None
         self.odometry = Odometry(settings.robot.wheel_radius, settings.robot.wheel_base,
-                                 tuple(settings.initial_pose))
+                                 settings.initial_pose)
         self.memory = LawMemory()
         self.counters = AgentCounters()
         self.last_feedback: WheelFeedback | None = None
         self.command = (0.0, 0.0)          # (v [m/s], u [rad/s]) after saturation
         self.law_mode = Mode.TRACK
-        self.reference = tuple(map(float, settings.initial_pose[:2]))   # m
+        x0, y0, _ = settings.initial_pose
+        self.reference = (float(x0), float(y0))   # m
         self._seq = 0
-        self._last_law = None              # monotonic time of the last law step
+        self._last_law: float | None = None     # monotonic time of the last law step
         self._mission_key: tuple | None = None
         self._formation: Formation | None = None
         self._armed_at = -math.inf         # monotonic time of the last arm request
@@ -95,7 +95,7 @@ class Agent:
     def arm(self) -> None:
         """Clear the drivers' errors and request closed loop (an explicit request); the
         request alone is repeated until both drivers report it (they may boot after the
-        robot computer), for at most ``arm_timeout``."""
+        robot computer), for at most ``[timeouts] arm``."""
         self.motor.clear_errors()
         self.motor.arm()
         self.failsafe = None
@@ -121,6 +121,28 @@ class Agent:
         if mode is AgentMode.FORMATION:
             self.failsafe = None
             self._last_law = None
+        return None
+
+    # --- parameters (from a ground station, between two ticks) --------------------------
+    def param(self, name: str) -> float:
+        """The value of runtime parameter ``name`` (agent.config.CONTROL_PARAMS)."""
+        return float(getattr(self.s.control, _PARAMS[name].field))
+
+    def set_param(self, name: str, value: float) -> str | None:
+        """Set runtime parameter ``name``; validated by the settings schema, in force from
+        the next period. Returns why it was refused (the old value stays), or None. This is
+        the only way the agent's settings change after start."""
+        spec = _PARAMS.get(name)
+        if spec is None:
+            return f"no parameter {name}"
+        if spec.read_only is not None:
+            return f"{name} is {spec.read_only}"
+        try:
+            control = dataclasses.replace(self.s.control, **{spec.field: float(value)})
+            self.s = dataclasses.replace(self.s, control=control)
+        except ConfigError as exc:
+            return f"{name} = {value:g} refused: {exc}"
+        log.info("robot %d: %s = %g", self.s.robot_id, name, self.param(name))
         return None
 
     # --- the loop body ----------------------------------------------------------------------
@@ -170,26 +192,26 @@ class Agent:
         """Failsafe on lost feedback, a driver error, or drivers that leave closed loop.
 
         While arming, the arm request is repeated every ``ARM_RETRY`` s until both drivers
-        report closed loop; only a driver error, or ``arm_timeout`` without success, is a
+        report closed loop; only a driver error, or ``[timeouts] arm`` without success, is a
         failsafe then."""
         reason = None
-        fresh = fb is not None and fb.age <= self.s.feedback_timeout
-        if fresh and fb.errors:
-            reason = "driver error: " + ", ".join(fb.errors)
+        fresh = fb if fb is not None and fb.age <= self.s.timeouts.feedback else None
+        if fresh is not None and fresh.errors:
+            reason = "driver error: " + ", ".join(fresh.errors)
         elif self._arming:
-            if fresh and fb.closed_loop:
+            if fresh is not None and fresh.closed_loop:
                 self._arming = False
                 log.info("robot %d: both drivers in closed loop", self.s.robot_id)
-            elif now_m - self._armed_at > self.s.arm_timeout:
+            elif now_m - self._armed_at > self.s.timeouts.arm:
                 self._arming = False
-                reason = (f"drivers not armed within {self.s.arm_timeout:g} s"
-                          + ("" if fresh else " (no feedback)"))
+                reason = (f"drivers not armed within {self.s.timeouts.arm:g} s"
+                          + ("" if fresh is not None else " (no feedback)"))
             elif now_m - self._arm_sent >= ARM_RETRY:
                 self.motor.arm()
                 self._arm_sent = now_m
-        elif not fresh:
+        elif fresh is None:
             reason = "driver feedback lost"
-        elif not fb.closed_loop:
+        elif not fresh.closed_loop:
             reason = "drivers not in closed loop control"
         if reason and self.failsafe is None:
             self.failsafe = reason
@@ -240,7 +262,7 @@ class Agent:
         a/2 at their last position."""
         me = self.s.robot_id
         near = in_range((r.msg for rid, r in neighbours.items() if rid != me),
-                        pose[0], pose[1], now_w, self.s.staleness, self.s.sensing_range)
+                        pose[0], pose[1], now_w, self.s.timeouts.staleness, self.s.sensing_range)
         self.counters.neighbour_age.extend(near.ages)
         obs_x, obs_y, obs_r = ((obs.centers[:, 0].tolist(), obs.centers[:, 1].tolist(),
                                 obs.radii.tolist()) if obs is not None else ([], [], []))

@@ -1,13 +1,13 @@
 """The agent process: what runs on a robot computer (``boundswarm agent --config FILE``).
 
-Builds the real ports from the validated settings (the robot's CAN bus with its two ODrive
-drivers, a Zenoh session), runs the agent's fixed-period loop until SIGINT/SIGTERM, then
-shuts down cleanly: zero velocity, drivers IDLE, liveliness token dropped, bus and session
-closed. Loop and agent statistics are written as JSON when asked.
+The one place where an agent is wired to the world: builds the real ports from the
+validated settings (the robot's CAN bus with its two ODrive drivers, a Zenoh session), the
+MAVLink link with the parameter table it serves, runs the agent's fixed-period loop until
+SIGINT/SIGTERM, then shuts down cleanly: zero velocity, drivers IDLE, liveliness token
+dropped, bus and session closed. Loop and agent statistics are written as JSON when asked.
 """
 from __future__ import annotations
 
-import dataclasses
 import gc
 import json
 import logging
@@ -15,23 +15,24 @@ import signal
 import time
 from pathlib import Path
 
-from agent.config import ControlParams
+from agent.config import CONTROL_PARAMS
 from agent.loop import FixedRateLoop, SystemClock, use_realtime
-from agent.node import Agent, AgentMode
+from agent.node import Agent
 from agent.settings import AgentSettings
 from agent.systemd import Notifier
+from common.vocabulary import AgentMode
 from transport.canbus import open_bus
 from transport.mavlink_link import VehicleState, open_link
 from transport.wheel_drivers import WheelDrivers
-from transport.zenoh_link import (Keys, SwarmLink, config_from_file, open_session,
-                                  session_config)
+from transport.zenoh_link import Keys, SwarmLink, config_from_file, open_session, session_config
 
 log = logging.getLogger(__name__)
 
 
 class AgentVehicle:
     """The agent as the vehicle a ground station commands (transport.mavlink_link's
-    VehicleControl): commands and parameter writes apply at the next period."""
+    VehicleControl): commands and parameter writes (Agent.set_param) apply at the next
+    period."""
 
     def __init__(self, agent: Agent):
         self.agent = agent
@@ -52,11 +53,11 @@ class AgentVehicle:
     def set_mode(self, mode: AgentMode) -> str | None:
         return self.agent.set_mode(mode)
 
-    def params(self) -> ControlParams:
-        return self.agent.s.control
+    def param(self, name: str) -> float:
+        return self.agent.param(name)
 
-    def apply_params(self, params: ControlParams) -> None:
-        self.agent.s = dataclasses.replace(self.agent.s, control=params)
+    def set_param(self, name: str, value: float) -> str | None:
+        return self.agent.set_param(name, value)
 
 
 def run_agent(settings: AgentSettings, stats_path: Path | None = None,
@@ -86,7 +87,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
                           thread_setup=(lambda: use_realtime(rt)) if rt > 0 else None)
         agent = Agent(s, motor, swarm, clock)
         link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
-                         clock.wall)
+                         clock.wall, params=CONTROL_PARAMS)
         realtime = rt > 0 and use_realtime(rt)
         loop = FixedRateLoop(s.control.period, clock)
         for sig in (signal.SIGINT, signal.SIGTERM):

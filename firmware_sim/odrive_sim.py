@@ -34,6 +34,7 @@ from functools import lru_cache
 
 import can
 
+from common import drivers
 from transport.odrive_frames import (ENCODER_ESTIMATES, AxisError, AxisState, Cmd, ControlMode,
                                      Frame, FrameError, InputMode, arbitration_id, decode,
                                      encode)
@@ -52,9 +53,9 @@ def _heartbeat_data(node: int, error: int, state: int) -> bytes:
 class EmulatedAxis:
     """One axis of emulated firmware; all times in seconds, speeds in rev/s."""
 
-    vel_limit: float = 10.0          # rev/s
-    ramp: float = 1000.0             # rev/s^2
-    watchdog: float = 0.1            # s, 0 disables
+    vel_limit: float = drivers.SPEED_LIMIT   # rev/s
+    ramp: float = drivers.RAMP               # rev/s^2
+    watchdog: float = drivers.WATCHDOG       # s, 0 disables
     coast_tau: float = 0.3           # s, spin-down time constant when IDLE
     bus_voltage: float = 24.0        # V
     state: AxisState = AxisState.IDLE
@@ -133,11 +134,11 @@ class Faults:
 
 @dataclass
 class DriverPair:
-    """The emulated drivers of one robot: axes ``right_node`` and ``left_node`` on ``bus``."""
+    """The emulated drivers of one robot: nodes ``left_node`` and ``right_node`` on ``bus``."""
 
     bus: can.BusABC
-    right_node: int = 1
-    left_node: int = 0
+    left_node: int = drivers.LEFT_NODE
+    right_node: int = drivers.RIGHT_NODE
     heartbeat_period: float = 0.1
     encoder_period: float = 0.01
     axes: dict = field(default_factory=dict)

@@ -19,10 +19,11 @@ import time
 from typing import Callable
 
 from agent.loop import FixedRateLoop, SystemClock, use_realtime
+from common import drivers
+from common.payloads import WheelsMsg
 from firmware_sim.odrive_sim import DriverPair
 from firmware_sim.sitl_plant import PlantRobot, SitlPlant
 from transport.canbus import open_bus
-from transport.payloads import WheelsMsg
 from transport.zenoh_link import Keys, Latest, open_session, session_config
 
 log = logging.getLogger(__name__)
@@ -152,7 +153,8 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
 
 def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str],
                    can_interface: str, can_channel: str | None, can_ports: dict[int, int],
-                   dt: float = 0.005, watchdog: float = 0.1, realtime_priority: int = 0) -> dict:
+                   dt: float = 0.005, watchdog: float = drivers.WATCHDOG,
+                   realtime_priority: int = 0) -> dict:
     """Host robots ``robot_ids`` of ``scenario`` until a signal; returns loop statistics.
     ``realtime_priority`` > 0: the plant loop runs SCHED_FIFO (emulated hardware must not
     starve when the agents load the machine)."""

@@ -33,8 +33,8 @@ import numpy as np
 
 from agent.config import RobotParams
 from agent.kinematics import TWO_PI, arc_step, body_velocity
+from common.payloads import ObstaclesMsg, TruthMsg
 from firmware_sim.world import Obstacles
-from transport.payloads import ObstaclesMsg, TruthMsg
 
 log = logging.getLogger(__name__)
 

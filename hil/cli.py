@@ -184,7 +184,7 @@ def cmd_router(args: argparse.Namespace, console: Console) -> int:
 
 def cmd_mission(args: argparse.Namespace, console: Console) -> int:
     """Publish the mission (formation and shared epoch) to a swarm."""
-    from transport.payloads import MissionMsg
+    from common.payloads import MissionMsg
     from transport.zenoh_link import (Keys, Presence, config_from_file, open_session,
                                       session_config)
     from hil.processes import wait_until
@@ -290,7 +290,7 @@ def cmd_plant(args: argparse.Namespace, console: Console) -> int:
             return EXIT_OK
         if not (args.robot and args.swarm):
             raise ValueError("plant --drivers-only with zenoh needs --robot and --swarm")
-        from transport.payloads import WheelsMsg
+        from common.payloads import WheelsMsg
         from transport.zenoh_link import Keys, open_session
         session = open_session(conf, f"drivers of robot {args.robot}")
         pub = session.declare_publisher(Keys(args.swarm).wheels(args.robot))

@@ -34,11 +34,11 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.config import TableReader, load_toml
-from agent.settings import (AgentSettings, CanSettings, MavlinkSettings, ZenohSettings,
-                            settings_to_toml)
+from agent.settings import AgentSettings, SensingSettings
+from common.schema import TableReader, load_toml, to_toml
 from hil.certs import SwarmCA, write_private
 from hil.scenario import load_scenario
+from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 PREFIX = "/opt/boundswarm"          # where install.sh puts the venv on a robot
@@ -95,7 +95,7 @@ def load_manifest(path: str | Path) -> SwarmManifest:
     return SwarmManifest(path, rd.string(doc, "swarm", "swarm"), scenario,
                          rd.string(router, "address", "[router] address"),
                          rd.integer(router, "port", "[router] port", 7447, lo=1, hi=65535),
-                         rd.string(gcs, "mavlink", "[gcs] mavlink", "udpout:127.0.0.1:14550"),
+                         rd.string(gcs, "mavlink", "[gcs] mavlink", MavlinkSettings.url),
                          tuple(robots))
 
 
@@ -256,9 +256,10 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
             control=sc.control, robot=sc.robot,
             can=CanSettings(interface="socketcan", channel=r.can_interface, bitrate=r.bitrate),
             zenoh=ZenohSettings(mode="client", connect=(), config="zenoh.json5"),
-            autostart=True, sensing_range=sc.sensing_range, realtime_priority=REALTIME_PRIORITY,
+            autostart=True, sensing=SensingSettings(sc.sensing_range),
+            realtime_priority=REALTIME_PRIORITY,
             mavlink=MavlinkSettings(url=manifest.mavlink, signing_key_file="mavlink.key"))
-        (b / "agent.toml").write_text(settings_to_toml(settings))
+        (b / "agent.toml").write_text(to_toml(settings))
         (b / "boundswarm-agent.service").write_text(UNIT.format(
             id=r.id, etc=etc, prefix=prefix, can=r.can_interface, bitrate=r.bitrate,
             rtprio=REALTIME_PRIORITY))

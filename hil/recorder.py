@@ -23,7 +23,7 @@ import zenoh
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from transport.payloads import (MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg)
+from common.payloads import MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg
 from transport.zenoh_link import Keys
 
 log = logging.getLogger(__name__)

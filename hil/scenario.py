@@ -21,11 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from agent.config import (ConfigError, ControlParams, RobotParams, TableReader, from_table,
-                          load_toml)
+from agent.config import ControlParams, RobotParams
 from agent.formation import Formation, FormationKind, formation_offsets
+from common.schema import ConfigError, TableReader, from_table, load_toml
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles
+
 
 class ScenarioError(ValueError):
     """A scenario file is unreadable, or a field in it is missing or wrong."""

@@ -28,13 +28,16 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from agent.settings import (AgentSettings, CanSettings, MavlinkSettings, ZenohSettings,
-                            settings_to_toml)
+from agent.settings import AgentSettings, SensingSettings
+from common.payloads import MissionMsg, StateMsg, TruthMsg
+from common.schema import to_toml
+from common.vocabulary import StateFlags
 from hil.mavlink_router import MavlinkRouter
 from hil.processes import Children, wait_until
 from hil.recorder import Recorder
 from hil.scenario import Scenario
-from transport.payloads import MissionMsg, StateFlags, StateMsg, TruthMsg
+from transport.canbus import DEFAULT_GROUP
+from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
 
 log = logging.getLogger(__name__)
@@ -99,7 +102,7 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
                    opts: SitlOptions, mavlink_port: int) -> AgentSettings:
     rid = int(sc.ids[index])
     if opts.can_interface == "udp_multicast":
-        can = CanSettings(interface="udp_multicast", channel=opts.can_channel or "ff11::b5:1",
+        can = CanSettings(interface="udp_multicast", channel=opts.can_channel or DEFAULT_GROUP,
                           port=opts.can_base_port + rid)
     else:
         can = CanSettings(interface=opts.can_interface,
@@ -108,7 +111,7 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
                          control=sc.control, robot=sc.robot, can=can,
                          zenoh=ZenohSettings(mode="client", connect=(endpoint,),
                                              near_radius=opts.near_radius),
-                         autostart=True, sensing_range=sc.sensing_range,
+                         autostart=True, sensing=SensingSettings(sc.sensing_range),
                          realtime_priority=opts.realtime_priority,
                          mavlink=MavlinkSettings(url=f"udpout:127.0.0.1:{mavlink_port}",
                                                  signing_key_file=opts.mavlink_key))
@@ -169,7 +172,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
         settings = [agent_settings(sc, i, swarm, endpoint, opts, mav_port)
                     for i in range(len(sc.ids))]
         for s in settings:
-            (config_dir / f"robot_{s.robot_id}.toml").write_text(settings_to_toml(s))
+            (config_dir / f"robot_{s.robot_id}.toml").write_text(to_toml(s))
         _write_manifest(out, sc, settings, endpoint, swarm)
 
         with Children(out / "logs") as children:
@@ -239,7 +242,7 @@ def _start_plants(children: Children, sc: Scenario, opts: SitlOptions, swarm: st
         if opts.realtime_priority:      # the emulated hardware ahead of the agents
             args += ["--realtime-priority", str(min(opts.realtime_priority + 1, 99))]
         if opts.can_interface == "udp_multicast":
-            args += ["--can-channel", opts.can_channel or "ff11::b5:1",
+            args += ["--can-channel", opts.can_channel or DEFAULT_GROUP,
                      "--can-base-port", str(opts.can_base_port)]
         elif opts.can_channel:
             args += ["--can-channel", opts.can_channel]

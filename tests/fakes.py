@@ -5,8 +5,8 @@ from types import MappingProxyType
 
 import numpy as np
 
-from agent.ports import WheelFeedback
-from transport.payloads import Received
+from common.payloads import Received
+from common.vocabulary import WheelFeedback
 
 
 class SimClock:

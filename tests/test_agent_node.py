@@ -1,14 +1,14 @@
 """The agent's read -> update -> write over in-memory ports, on simulated time."""
 import numpy as np
 import pytest
+from fakes import MirrorMotor, SharedSwarm, SimClock
 
 from agent.config import ControlParams
-from common.vocabulary import Mode
 from agent.loop import FixedRateLoop
-from agent.node import Agent, AgentMode
+from agent.node import Agent
 from agent.settings import AgentSettings
-from fakes import MirrorMotor, SharedSwarm, SimClock
-from transport.payloads import MissionMsg, ObstaclesMsg, StateFlags
+from common.payloads import MissionMsg, ObstaclesMsg
+from common.vocabulary import AgentMode, Mode, StateFlags
 
 
 def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in=0.0):
@@ -188,3 +188,22 @@ def test_every_period_reads_the_same_ports_whatever_the_mode():
     b.tick()
     a.tick()                                   # formation, mission running
     assert reads == ["mission", "neighbours", "obstacles"] * 3
+
+
+def test_runtime_parameters_change_through_set_param_only_when_valid():
+    clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)])
+    before = agent.s
+    assert agent.param("BS_K_THETA") == 3.0
+    assert agent.set_param("BS_K_THETA", 2.5) is None
+    assert agent.s.control.K_theta == agent.param("BS_K_THETA") == 2.5
+    assert agent.s.robot == before.robot and agent.s.timeouts == before.timeouts
+    settled = agent.s
+    for name, value, why in [("BS_K", -1.0, "BS_K = -1 refused: ControlParams.K: must be > 0"),
+                             ("BS_B", 10.0, "need 0 < a < b < c"),
+                             ("BS_PERIOD", 0.01, "BS_PERIOD is read-only at runtime"),
+                             ("BS_NOPE", 1.0, "no parameter BS_NOPE")]:
+        reason = agent.set_param(name, value)
+        assert reason is not None and why in reason
+        assert agent.s is settled
+    # the sensing range was fixed at start (2 c), a new c does not move it
+    assert agent.set_param("BS_C", 4.5) is None and agent.s.sensing_range == 8.0

@@ -1,7 +1,16 @@
+import argparse
+import dataclasses
+
 import pytest
 
-from agent.config import (ConfigError, ControlParams, RobotParams, braking_margin,
-                          check_braking_margin, describe_fields, from_table)
+from agent.config import (
+    CONTROL_PARAMS,
+    ControlParams,
+    RobotParams,
+    braking_margin,
+    check_braking_margin,
+)
+from common.schema import ConfigError, add_arguments, fields, from_table, section_from_args
 
 
 def test_paper_defaults():
@@ -15,7 +24,8 @@ def test_period_breaking_the_bound_is_refused_with_the_numbers():
     with pytest.raises(ConfigError) as exc:
         ControlParams(period=0.05)
     msg = str(exc.value)
-    assert "period 0.05" in msg and "0.0417" in msg and "(b - a)/(2 K D_max)" in msg
+    assert "ControlParams.period: period 0.05" in msg and "0.0417" in msg
+    assert "(b - a)/(2 K D_max)" in msg
 
 
 def test_lower_gains_allow_a_longer_period():
@@ -33,19 +43,21 @@ def test_bad_values_name_the_field(kw, field):
 def test_from_table_refuses_unknown_and_non_numbers():
     with pytest.raises(ConfigError, match=r"x.toml \[control\]: unknown field\(s\) Kp"):
         from_table(ControlParams, {"Kp": 1.0}, "x.toml [control]")
-    with pytest.raises(ConfigError, match="'K' must be a number"):
+    with pytest.raises(ConfigError, match=r"x.toml \[control\]: ControlParams.K: expected a "
+                                          r"number, got '4'"):
         from_table(ControlParams, {"K": "4"}, "x.toml [control]")
-    with pytest.raises(ConfigError, match=r"x.toml \[robot\]: RobotParams.wheel_radius"):
+    with pytest.raises(ConfigError, match=r"x.toml \[robot\]: RobotParams.wheel_radius: must "
+                                          r"be > 0 \[m\], got 0.0"):
         from_table(RobotParams, {"wheel_radius": 0}, "x.toml [robot]")
     assert from_table(ControlParams, {"K": 2}, "t").K == 2.0
 
 
-def test_braking_margin_matches_design():
+def test_braking_margin_matches_the_specification():
     fast = braking_margin(ControlParams(), RobotParams())
     assert fast.ok and fast.v_max == 12.0
     assert fast.reaction == pytest.approx(0.24)
     slow_ramp = braking_margin(ControlParams(), RobotParams(wheel_ramp=200.0))
-    assert not slow_ramp.ok                          # DESIGN: 200 rev/s^2 already breaks it
+    assert not slow_ramp.ok               # docs/controller.md: 200 rev/s^2 already breaks it
     with pytest.raises(ConfigError, match="braking margin"):
         check_braking_margin(ControlParams(), RobotParams(wheel_ramp=200.0), strict=True)
     # stale neighbour data eats the margin too
@@ -58,5 +70,34 @@ def test_braking_margin_warns_when_not_strict(caplog):
 
 
 def test_every_field_is_documented_with_a_unit():
-    for name, default, unit, doc in describe_fields(ControlParams) + describe_fields(RobotParams):
-        assert unit and doc and isinstance(default, float), name
+    for f in fields(ControlParams) + fields(RobotParams):
+        assert f.unit and f.doc and isinstance(f.default, float), f.name
+
+
+def test_control_params_as_runtime_parameters():
+    names = [p.name for p in CONTROL_PARAMS]
+    assert names == ["BS_K", "BS_K_THETA", "BS_D_MAX", "BS_K_IJ", "BS_A", "BS_B", "BS_C",
+                     "BS_PERIOD", "BS_U_MAX", "BS_HYST"]
+    assert [p.field for p in CONTROL_PARAMS] == [f.name for f in dataclasses.fields(ControlParams)]
+    assert [p.index for p in CONTROL_PARAMS] == list(range(len(names)))
+    period = CONTROL_PARAMS[names.index("BS_PERIOD")]
+    assert period.read_only and "read-only at runtime" in period.read_only
+    assert all(p.read_only is None for p in CONTROL_PARAMS if p is not period)
+    k = CONTROL_PARAMS[0]
+    assert (k.unit, k.lo, k.hi) == ("1/s", 0.0, None) and "translational gain" in k.doc
+
+
+def test_flags_derived_from_a_section():
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, RobotParams, prefix="robot-")
+    helps = {a.dest: a.help for a in parser._actions}
+    assert "[rev/s]" in helps["robot_wheel_speed_limit"] and "10.0" in parser.format_help()
+    assert section_from_args(RobotParams, parser.parse_args([]), "robot-") == RobotParams()
+    args = parser.parse_args(["--robot-wheel-ramp", "200", "--robot-wheel-radius", "0.1"])
+    assert section_from_args(RobotParams, args, "robot-") == RobotParams(wheel_ramp=200.0,
+                                                                          wheel_radius=0.1)
+    with pytest.raises(ConfigError, match=r"--robot-wheel-base: must be > 0 \[m\]"):
+        section_from_args(RobotParams, parser.parse_args(["--robot-wheel-base", "-1"]),
+                          "robot-")
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--robot-wheel-base", "wide"])

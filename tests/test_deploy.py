@@ -254,7 +254,8 @@ class TamperingLink:
 def test_tampered_or_replayed_records_on_a_robot_link_deliver_nothing(bundles, router, mode):
     """Mutual TLS on the link: a modified or repeated record breaks robot 1's connection at
     the router; no altered or repeated state reaches a subscriber."""
-    from transport.payloads import StateFlags, StateMsg
+    from common.payloads import StateMsg
+    from common.vocabulary import StateFlags
     out, port = bundles["out"], bundles["port"]
     link = TamperingLink(port, mode)
     got: list[bytes] = []
@@ -290,7 +291,8 @@ def test_tampered_or_replayed_records_on_a_robot_link_deliver_nothing(bundles, r
 def test_a_replayed_state_payload_is_dropped_by_the_neighbours(bundles, router):
     """An old state of robot 1 sent again on its key (by a valid client) is older than the
     one held: robot 2's agent drops it and counts it."""
-    from transport.payloads import StateFlags, StateMsg
+    from common.payloads import StateMsg
+    from common.vocabulary import StateFlags
     from transport.zenoh_link import Keys, SwarmLink
     out, port = bundles["out"], bundles["port"]
     r1, r2 = _client(out, "robot-1", port), _client(out, "robot-2", port)

@@ -20,28 +20,30 @@ from fakes import MirrorMotor, SharedSwarm, SimClock
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mav2
 
-from agent.config import ConfigError, ControlParams
-from agent.node import Agent, AgentMode
+from agent.config import CONTROL_PARAMS, ControlParams
+from agent.node import Agent
 from agent.process import AgentVehicle
 from agent.settings import AgentSettings
-from transport import mavlink_params
+from common.schema import ConfigError, Param, from_table
+from common.vocabulary import AgentMode
 from transport.mavlink_io import TcpTransport, UdpTransport, open_transport
 from transport.mavlink_link import (
     CustomMode,
     MavlinkLink,
-    MavlinkSettings,
     VehicleState,
     geodetic,
     ned_yaw,
     open_link,
     wrap_pi,
 )
+from transport.mavlink_params import ParamTable
 from transport.mavlink_signing import (
     SignatureCheck,
     Verdict,
     load_signing_key,
     signing_timestamp,
 )
+from transport.settings import MavlinkSettings
 
 ROBOT = 7
 GCS_SYS, GCS_COMP = 255, 190
@@ -64,7 +66,7 @@ class FakeVehicle:
     def __init__(self):
         self.mode, self.failsafe = AgentMode.DISARMED, None
         self.pose, self.v, self.u = (3.0, 4.0, 0.3), 1.0, 0.5
-        self.control = ControlParams()
+        self.values = {p.name: float(getattr(ControlParams(), p.field)) for p in CONTROL_PARAMS}
         self.refuse: dict[str, str] = {}
         self.calls: list = []
 
@@ -90,12 +92,15 @@ class FakeVehicle:
         self.mode = mode
         return None
 
-    def params(self):
-        return self.control
+    def param(self, name):
+        return self.values[name]
 
-    def apply_params(self, params):
-        self.calls.append("apply")
-        self.control = params
+    def set_param(self, name, value):
+        self.calls.append(("set_param", name))
+        if "set_param" in self.refuse:
+            return self.refuse["set_param"]
+        self.values[name] = value
+        return None
 
 
 def gcs_connection(url: str):
@@ -165,7 +170,7 @@ def make_rig():
         opened.append(gcs)
         s = dataclasses.replace(settings or MavlinkSettings(), url=f"udpout:127.0.0.1:{port}")
         link = MavlinkLink(open_transport(s.url), vehicle or FakeVehicle(), ROBOT, s, key,
-                           wall=time.time)
+                           wall=time.time, params=CONTROL_PARAMS)
         opened.append(link)
         rig = Rig(link, gcs, link.vehicle, SimClock(start=100.0))
         rig.until("HEARTBEAT")                   # the GCS now knows the robot's address
@@ -354,10 +359,12 @@ NEW_VALUES = {"BS_K": 3.5, "BS_K_THETA": 2.5, "BS_D_MAX": 2.5, "BS_K_IJ": 2.0, "
 
 
 def test_param_names_fit_mavlink():
-    names = [p.name for p in mavlink_params.PARAMS]
+    names = [p.name for p in ParamTable(CONTROL_PARAMS).params]
     assert len(set(names)) == len(names) == len(dataclasses.fields(ControlParams))
     assert all(len(n) <= 16 for n in names)
     assert set(NEW_VALUES) | {"BS_PERIOD"} == set(names)
+    with pytest.raises(ValueError, match="longer than 16"):
+        ParamTable([Param(0, "BS_" + "X" * 14, "x", "m", "x", None, None, None)])
 
 
 def test_param_list_read_and_every_write_round_trips(make_rig):
@@ -365,13 +372,13 @@ def test_param_list_read_and_every_write_round_trips(make_rig):
     v = rig.vehicle
     rig.gcs.mav.param_request_list_send(ROBOT, 1)
     values = {}
-    for _ in range(len(mavlink_params.PARAMS)):
+    for _ in range(len(CONTROL_PARAMS)):
         m = rig.until("PARAM_VALUE", lambda m: m.param_id not in values)
         values[m.param_id] = m
     defaults = ControlParams()
-    for spec in mavlink_params.PARAMS:
+    for spec in CONTROL_PARAMS:
         m = values[spec.name]
-        assert (m.param_index, m.param_count) == (spec.index, len(mavlink_params.PARAMS))
+        assert (m.param_index, m.param_count) == (spec.index, len(CONTROL_PARAMS))
         assert m.param_type == mav2.MAV_PARAM_TYPE_REAL32
         assert m.param_value == f32(getattr(defaults, spec.field))
 
@@ -383,27 +390,37 @@ def test_param_list_read_and_every_write_round_trips(make_rig):
     for name, value in NEW_VALUES.items():
         rig.gcs.mav.param_set_send(ROBOT, 1, name.encode(), value, mav2.MAV_PARAM_TYPE_REAL32)
         m = rig.until("PARAM_VALUE", lambda m, name=name: m.param_id == name)
-        assert m.param_value == value
-        assert getattr(v.control, mavlink_params.find(name).field) == value
+        assert m.param_value == value and v.values[name] == value
     assert rig.link.counters.params_set == len(NEW_VALUES)
-    assert v.control == ControlParams(K=3.5, K_theta=2.5, D_max=2.5, K_ij=2.0, a=0.75, b=2.5,
-                                      c=4.5, u_max=6.0, hysteresis=0.25)
+    assert v.calls == [("set_param", name) for name in NEW_VALUES]
+
+
+def test_a_refused_write_sends_the_value_in_force_and_the_reason(make_rig):
+    rig = make_rig()
+    rig.vehicle.refuse["set_param"] = "BS_K = 9 refused: no"
+    rig.gcs.mav.param_set_send(ROBOT, 1, b"BS_K", 9.0, mav2.MAV_PARAM_TYPE_REAL32)
+    assert rig.until("PARAM_VALUE", lambda m: m.param_id == "BS_K").param_value == 4.0
+    assert "BS_K = 9 refused: no" in rig.texts()
+    assert (rig.link.counters.params_set, rig.link.counters.params_refused) == (0, 1)
 
 
 @pytest.mark.parametrize("name, value, why", [
-    ("BS_K", -1.0, "ControlParams.K: must be > 0"),
+    ("BS_K", -1.0, "ControlParams.K: must be > 0 [1/s]"),
     ("BS_B", 10.0, "need 0 < a < b < c"),
     ("BS_K", 100.0, "period"),
     ("BS_U_MAX", float("nan"), "must be finite"),
     ("BS_PERIOD", 0.01, "BS_PERIOD is read-only at runtime"),
 ])
 def test_invalid_param_is_refused_with_the_old_value_and_a_reason(make_rig, name, value, why):
-    rig = make_rig()
-    before = rig.vehicle.control
+    clock = SimClock()
+    agent = Agent(AgentSettings(robot_id=ROBOT, swarm="t", initial_pose=(1.0, 2.0, 0.0)),
+                  MirrorMotor(clock), SharedSwarm(clock).port(ROBOT), clock)
+    rig = make_rig(vehicle=AgentVehicle(agent))
+    before = agent.s
     rig.gcs.mav.param_set_send(ROBOT, 1, name.encode(), value, mav2.MAV_PARAM_TYPE_REAL32)
     m = rig.until("PARAM_VALUE", lambda m: m.param_id == name)
-    assert m.param_value == f32(mavlink_params.value(before, mavlink_params.find(name)))
-    assert rig.vehicle.control is before and "apply" not in rig.vehicle.calls
+    assert m.param_value == f32(agent.param(name))
+    assert agent.s is before
     chunks = [m for m in rig.seen if m.get_type() == "STATUSTEXT"]
     text = "".join(m.text for m in chunks)
     assert why in text and text.startswith(name)
@@ -619,20 +636,22 @@ def test_bad_urls_are_refused_by_name(url):
 
 
 def test_settings_validation_and_table():
-    with pytest.raises(ConfigError, match="mavlink.origin: latitude"):
+    with pytest.raises(ConfigError, match="MavlinkSettings.origin: latitude"):
         MavlinkSettings(origin=(89.0, 0.0, 0.0))
-    with pytest.raises(ConfigError, match="mavlink.gcs_timeout"):
+    with pytest.raises(ConfigError, match="MavlinkSettings.gcs_timeout"):
         MavlinkSettings(gcs_timeout=0.0)
-    s = MavlinkSettings.from_table({"url": "udpin:127.0.0.1:14551", "gcs_failsafe": True,
-                                    "origin": [47.0, 8.0, 400.0]}, "agent.toml")
+    where = "agent.toml [mavlink]"
+    s = from_table(MavlinkSettings, {"url": "udpin:127.0.0.1:14551", "gcs_failsafe": True,
+                                     "origin": [47, 8.0, 400.0]}, where)
     assert s.gcs_failsafe and s.origin == (47.0, 8.0, 400.0) and s.gcs_timeout == 1.5
-    with pytest.raises(ConfigError, match=r"agent.toml: \[mavlink\]: unknown field\(s\) rate"):
-        MavlinkSettings.from_table({"rate": 4}, "agent.toml")
-    with pytest.raises(ConfigError, match="agent.toml: mavlink.origin: longitude"):
-        MavlinkSettings.from_table({"origin": [0.0, 200.0, 0.0]}, "agent.toml")
-    with pytest.raises(ConfigError, match=r"^agent.toml: \[mavlink\] gcs_timeout: must be > 0"):
-        MavlinkSettings.from_table({"gcs_timeout": -1}, "agent.toml")
-    with pytest.raises(ConfigError, match="mavlink.url: MAVLink URL 'udp:1.2.3.4'"):
+    with pytest.raises(ConfigError, match=r"agent.toml \[mavlink\]: unknown field\(s\) rate"):
+        from_table(MavlinkSettings, {"rate": 4}, where)
+    with pytest.raises(ConfigError, match=r"\[mavlink\]: MavlinkSettings.origin: longitude"):
+        from_table(MavlinkSettings, {"origin": [0.0, 200.0, 0.0]}, where)
+    with pytest.raises(ConfigError, match=r"^agent.toml \[mavlink\]: MavlinkSettings.gcs_timeout"
+                                          r": must be > 0 \[s\], got -1.0"):
+        from_table(MavlinkSettings, {"gcs_timeout": -1}, where)
+    with pytest.raises(ConfigError, match="MavlinkSettings.url: MAVLink URL 'udp:1.2.3.4'"):
         MavlinkSettings(url="udp:1.2.3.4")
 
 

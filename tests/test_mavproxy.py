@@ -32,9 +32,10 @@ pytest.importorskip("MAVProxy", reason="needs the MAVProxy ground station: pip i
                                        "--no-deps 'MAVProxy>=1.8.75' (its other dependencies "
                                        "are 3D-map/camera ones, not needed here)")
 
+from agent.config import CONTROL_PARAMS as PARAMS  # noqa: E402
+from common.payloads import PayloadError, StateMsg, TruthMsg  # noqa: E402
+from common.vocabulary import StateFlags  # noqa: E402
 from hil.processes import wait_until  # noqa: E402
-from transport.mavlink_params import PARAMS  # noqa: E402
-from transport.payloads import PayloadError, StateFlags, StateMsg, TruthMsg  # noqa: E402
 from transport.zenoh_link import Keys, open_session, session_config  # noqa: E402
 from procs import alive  # noqa: E402
 

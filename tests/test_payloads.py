@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from transport.payloads import (HEADER, MissionMsg, ObstaclesMsg, PayloadError, StateFlags,
-                                StateMsg, TruthMsg)
+from common.payloads import HEADER, MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg
+from common.vocabulary import StateFlags
 
 STATE = StateMsg(robot_id=3, seq=7, stamp=1_700_000_000.25, x=1.5, y=-2.0, theta=0.5,
                  v=1.0, u=-0.25, x_d=4.0, y_d=-8.0, mode=2, flags=StateFlags.ARMED)

@@ -55,7 +55,7 @@ def test_sitl_plant_moves_each_robot_along_its_wheels_arc():
     heard from late: each pose is the closed-form unicycle motion of its wheel speeds."""
     from agent.kinematics import TWO_PI, body_velocity, wrap_angle
     from firmware_sim.sitl_plant import PlantRobot
-    from transport.payloads import ObstaclesMsg, TruthMsg
+    from common.payloads import ObstaclesMsg, TruthMsg
 
     robot = RobotParams()
     speeds = [(2.0, 2.0), (3.0, -3.0), (0.5, 1.5), (1.0, 2.0)]

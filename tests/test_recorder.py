@@ -6,14 +6,14 @@ import time
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from mcap.reader import make_reader
 
+from common.payloads import MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg, WheelsMsg
+from common.vocabulary import StateFlags
 from hil.processes import wait_until
 from hil.recorder import ENCODERS, Recorder, read_messages
-from transport.payloads import (MissionMsg, ObstaclesMsg, PayloadError, StateFlags, StateMsg,
-                                TruthMsg, WheelsMsg)
 from transport.zenoh_link import Keys, open_session, session_config
 
 

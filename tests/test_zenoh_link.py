@@ -5,8 +5,9 @@ import time
 
 import pytest
 
+from common.payloads import StateMsg
+from common.vocabulary import StateFlags
 from hil.processes import wait_until
-from transport.payloads import StateFlags, StateMsg
 from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
 
 
@@ -97,8 +98,8 @@ def test_unreachable_router_is_a_clear_error():
 def test_swarm_link_between_two_agents_and_a_recording(sessions, tmp_path):
     import numpy as np
 
+    from common.payloads import MissionMsg, ObstaclesMsg
     from hil.recorder import Recorder, read_messages
-    from transport.payloads import MissionMsg, ObstaclesMsg
     from transport.zenoh_link import SwarmLink
 
     a, b = sessions
@@ -177,8 +178,8 @@ def test_near_states_subscribe_to_near_robots_only(sessions):
 
 
 def test_near_radius_below_the_sensing_range_is_refused(tmp_path):
-    from agent.config import ConfigError
     from agent.settings import load_settings
+    from common.schema import ConfigError
 
     cfg = tmp_path / "robot.toml"
     cfg.write_text('robot_id = 1\nswarm = "s"\ninitial_pose = [0.0, 0.0, 0.0]\n'

@@ -41,7 +41,8 @@ MAV_CMD_DO_SET_MODE (param1 with CUSTOM_MODE_ENABLED, param2 the custom mode), a
 message (acknowledged as MAV_CMD_DO_SET_MODE). Answers: ACCEPTED; DENIED with the reason in a
 STATUSTEXT; UNSUPPORTED for any other command. A broadcast (target_system 0) is ignored: one
 message must not arm a whole swarm. Parameters: see :mod:`transport.mavlink_params`; reads
-accept a broadcast target, writes do not.
+accept a broadcast target, writes do not; a write goes to the vehicle's one
+``set_param``, which validates it (a refusal keeps the old value and says why).
 
 With signing on (:mod:`transport.mavlink_signing`) every incoming frame must carry a good
 signature from the key, on a fresh timestamp; unsigned, wrong-key and replayed frames are
@@ -53,24 +54,24 @@ import dataclasses
 import enum
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar, Protocol
 
 from pymavlink.dialects.v20 import common as mav2
 
-from agent.config import ControlParams
-from agent.node import AgentMode
-from agent.settings import MavlinkSettings
-from transport import mavlink_params
+from common.schema import Param
+from common.vocabulary import AgentMode
 from transport.mavlink_io import Transport, open_transport
+from transport.mavlink_params import ParamTable
 from transport.mavlink_signing import (
     SignatureCheck,
     Verdict,
     load_signing_key,
     signing_timestamp,
 )
+from transport.settings import MavlinkSettings
 
 log = logging.getLogger(__name__)
 
@@ -129,8 +130,8 @@ class VehicleControl(Protocol):
     def arm(self) -> str | None: ...                       # reason when refused
     def disarm(self) -> str | None: ...
     def set_mode(self, mode: AgentMode) -> str | None: ...  # HOLD or FORMATION
-    def params(self) -> ControlParams: ...                  # the parameters in force
-    def apply_params(self, params: ControlParams) -> None: ...   # validated; next period
+    def param(self, name: str) -> float: ...                # a parameter's value in force
+    def set_param(self, name: str, value: float) -> str | None: ...  # validated; next period
 
 
 def wrap_pi(angle: float) -> float:
@@ -195,11 +196,12 @@ class MavlinkLink:
     def __init__(self, transport: Transport, vehicle: VehicleControl, system_id: int,
                  settings: MavlinkSettings = MavlinkSettings(),
                  signing_key: bytes | None = None,
-                 wall: Callable[[], float] | None = None):
+                 wall: Callable[[], float] | None = None, params: Sequence[Param] = ()):
         if not 1 <= system_id <= 255:
             raise ValueError(f"MAVLink system id must be in 1..255, got {system_id}")
         self.transport, self.vehicle, self.system_id = transport, vehicle, system_id
         self.s = settings
+        self.params = ParamTable(params)
         self.counters = LinkCounters()
         self._tx = mav2.MAVLink(transport, srcSystem=system_id, srcComponent=COMPONENT_ID)
         self._rx = self._parser()
@@ -236,7 +238,7 @@ class MavlinkLink:
             state = self.vehicle.state()
             self._start, self._last_gcs, self._last = now, now, state
             self._home = (state.y, state.x)
-        if self._check is not None:
+        if self._check is not None and self._wall is not None:
             self._tx.signing.timestamp = max(self._tx.signing.timestamp,
                                              signing_timestamp(self._wall()))
         self._receive(now)
@@ -245,7 +247,7 @@ class MavlinkLink:
         state = self._gcs_failsafe(now, state)
         boot_ms = int((now - self._start) * 1000.0) & 0xFFFFFFFF
         for _ in range(min(PARAMS_PER_POLL, len(self._param_queue))):
-            self._send_param(mavlink_params.PARAMS[self._param_queue.pop(0)])
+            self._send_param(self.params.params[self._param_queue.pop(0)])
         for stream in self._streams:
             if stream.due(self._start, now):
                 stream.send(boot_ms, state)
@@ -388,12 +390,12 @@ class MavlinkLink:
 
     def _on_param_request_list(self, msg, now: float) -> None:
         if self._for_us(msg, broadcast_ok=True):
-            self._param_queue = list(range(len(mavlink_params.PARAMS)))
+            self._param_queue = list(range(len(self.params)))
 
     def _on_param_request_read(self, msg, now: float) -> None:
         if not self._for_us(msg, broadcast_ok=True):
             return
-        spec = mavlink_params.find(msg.param_id, msg.param_index)
+        spec = self.params.find(msg.param_id, msg.param_index)
         if spec is None:
             log.info("robot %d: no parameter %r (index %d)", self.system_id, msg.param_id,
                      msg.param_index)
@@ -403,21 +405,18 @@ class MavlinkLink:
     def _on_param_set(self, msg, now: float) -> None:
         if not self._for_us(msg):
             return
-        spec = mavlink_params.find(msg.param_id)
+        spec = self.params.find(msg.param_id)
         if spec is None:
             self.counters.params_refused += 1
             self._statustext(mav2.MAV_SEVERITY_WARNING, f"no parameter {msg.param_id}")
             return
-        result = mavlink_params.set_value(self.vehicle.params(), spec, msg.param_value)
-        if result.refused is None:
+        refused = self.vehicle.set_param(spec.name, msg.param_value)
+        if refused is None:
             self.counters.params_set += 1
-            self.vehicle.apply_params(result.params)
-            log.info("robot %d: %s = %g", self.system_id, spec.name,
-                     mavlink_params.value(result.params, spec))
         else:
             self.counters.params_refused += 1
-            self._statustext(mav2.MAV_SEVERITY_WARNING, result.refused)
-        self._send_param(spec, result.params)
+            self._statustext(mav2.MAV_SEVERITY_WARNING, refused)
+        self._send_param(spec)
 
     _handlers: ClassVar[dict] = {
         mav2.MAVLINK_MSG_ID_HEARTBEAT: _on_heartbeat,
@@ -432,6 +431,8 @@ class MavlinkLink:
     # --- events -------------------------------------------------------------------------
     def _report_changes(self, state: VehicleState) -> None:
         last, self._last = self._last, state
+        if last is None:
+            return
         if state.mode is not last.mode:
             if state.mode is AgentMode.DISARMED:
                 self._statustext(mav2.MAV_SEVERITY_NOTICE, "disarmed")
@@ -492,12 +493,11 @@ class MavlinkLink:
             log.error("robot %d: MAVLink %s failed: %s (further errors only counted)",
                       self.system_id, what, exc)
 
-    def _send_param(self, spec: mavlink_params.ParamSpec,
-                    params: ControlParams | None = None) -> None:
-        params = self.vehicle.params() if params is None else params
+    def _send_param(self, spec: Param) -> None:
+        """PARAM_VALUE of ``spec``: the value in force (after a write, accepted or not)."""
         self._send(self._tx.param_value_encode(
-            spec.name.encode("ascii"), mavlink_params.value(params, spec),
-            mav2.MAV_PARAM_TYPE_REAL32, len(mavlink_params.PARAMS), spec.index))
+            spec.name.encode("ascii"), self.vehicle.param(spec.name),
+            mav2.MAV_PARAM_TYPE_REAL32, len(self.params), spec.index))
 
     def _send_heartbeat(self, boot_ms: int, st: VehicleState) -> None:
         armed = st.mode is not AgentMode.DISARMED
@@ -550,15 +550,16 @@ class MavlinkLink:
 
 def open_link(settings: MavlinkSettings, vehicle: VehicleControl, system_id: int,
               monotonic: Callable[[], float], wall: Callable[[], float],
-              base: Path | None = None) -> MavlinkLink:
+              base: Path | None = None, params: Sequence[Param] = ()) -> MavlinkLink:
     """Open the transport of ``settings.url`` and load the signing key, if any.
 
     ``monotonic`` [s] paces TCP reconnects, ``wall`` [s, UNIX] sets signing timestamps; a
-    relative key file is taken from ``base`` (the agent config's folder)."""
+    relative key file is taken from ``base`` (the agent config's folder); ``params`` is the
+    parameter table served (transport.mavlink_params)."""
     key = None
     if settings.signing_key_file is not None:
         path = Path(settings.signing_key_file)
         key = load_signing_key(base / path if base is not None and not path.is_absolute()
                                else path)
     transport = open_transport(settings.url, monotonic)
-    return MavlinkLink(transport, vehicle, system_id, settings, key, wall)
+    return MavlinkLink(transport, vehicle, system_id, settings, key, wall, params)

@@ -1,4 +1,4 @@
-"""The host side of a robot's two ODrive wheel drivers (agent.ports.MotorPort).
+"""The host side of a robot's two ODrive wheel drivers (common.ports.MotorPort).
 
 Arming: clear errors, velocity control with VEL_RAMP, limits, CLOSED_LOOP_CONTROL. Every
 period the agent sends both wheel velocities [rev/s] (which also feeds the drivers'
@@ -17,9 +17,17 @@ from typing import Callable
 
 import can
 
-from agent.ports import WheelFeedback
-from transport.odrive_frames import (AxisState, Cmd, ControlMode, InputMode, encode, error_names,
-                                     receive)
+from common import drivers
+from common.vocabulary import WheelFeedback
+from transport.odrive_frames import (
+    AxisState,
+    Cmd,
+    ControlMode,
+    InputMode,
+    encode,
+    error_names,
+    receive,
+)
 
 log = logging.getLogger(__name__)
 
@@ -43,8 +51,9 @@ class AxisStatus:
 class WheelDrivers:
     """Left and right ODrive axes on one bus; + wheel velocity drives the robot forward."""
 
-    def __init__(self, bus: can.BusABC, left_node: int = 0, right_node: int = 1,
-                 vel_limit: float = 10.0, current_limit: float = 20.0,
+    def __init__(self, bus: can.BusABC, left_node: int = drivers.LEFT_NODE,
+                 right_node: int = drivers.RIGHT_NODE, vel_limit: float = drivers.SPEED_LIMIT,
+                 current_limit: float = drivers.CURRENT_LIMIT,
                  clock: Callable[[], float] = time.monotonic):
         self.bus, self.clock = bus, clock
         self.left_node, self.right_node = left_node, right_node

@@ -2,7 +2,7 @@
 
 Key space (prefix ``boundswarm/<swarm>``)::
 
-    robot/<id>/state       agent state every period (transport.payloads.StateMsg)
+    robot/<id>/state       agent state every period (common.payloads.StateMsg)
     robot/<id>/beacon      the same state at a low rate (5 Hz), for robots far away
     robot/<id>             liveliness token while the agent runs
     robot/<id>/obstacles   obstacle detections for that robot (ObstaclesMsg)
@@ -33,8 +33,7 @@ from typing import Callable, Generic, Iterable, Mapping, TypeVar
 
 import zenoh
 
-from transport.payloads import (MissionMsg, ObstaclesMsg, PayloadError, Received,
-                                StateMsg)
+from common.payloads import MissionMsg, ObstaclesMsg, PayloadError, Received, StateMsg
 
 log = logging.getLogger(__name__)
 
@@ -346,7 +345,7 @@ class NearStates:
 
 
 class SwarmLink:
-    """One agent's Zenoh link (agent.ports.SwarmPort): its state out (and a beacon every
+    """One agent's Zenoh link (common.ports.SwarmPort): its state out (and a beacon every
     ``BEACON_PERIOD``); neighbours, its obstacles and the mission in; a liveliness token
     while it runs. ``near_radius`` [m] > 0 takes full-rate states only from robots within
     it (:class:`NearStates`; ``thread_setup`` runs first in its refocus thread); 0 takes every

@@ -1,26 +1,15 @@
 """The seams between the agent and the world: what it needs from its links.
 
-The agent depends only on these protocols; the process entry point hands in the real
-implementations (python-can + ODrive drivers, a Zenoh session) and tests hand in fakes, so
-SITL and hardware differ only in what is injected.
+The agent depends only on these protocols; the process wiring (agent.process) hands in the
+real implementations (python-can + ODrive drivers, a Zenoh session) and tests hand in fakes,
+so SITL and hardware differ only in what is injected.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Mapping, Protocol
 
-from transport.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
-
-
-@dataclass(frozen=True)
-class WheelFeedback:
-    """What the two wheel drivers last reported."""
-
-    pos_rev: tuple[float, float]      # (right, left) encoder positions [rev], + forward
-    vel_rev_s: tuple[float, float]    # (right, left) encoder velocities [rev/s]
-    age: float                        # s since the older of the two encoder estimates
-    closed_loop: bool                 # both axes in CLOSED_LOOP_CONTROL
-    errors: tuple[str, ...]           # names of the active axis errors, both axes
+from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
+from common.vocabulary import WheelFeedback
 
 
 class MotorPort(Protocol):

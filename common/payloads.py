@@ -12,8 +12,8 @@ Every payload is little-endian and starts with the same 16-byte header::
 followed by the body of its kind:
 
 * STATE (key ``.../robot/<id>/state``, 36-byte body, 52 bytes in all):
-  x, y, theta, v, u, x_d, y_d as f32 [m, m, rad, m/s, rad/s, m, m], mode u8 (common.vocabulary.Mode),
-  flags u8 (StateFlags), 6 reserved zero bytes.
+  x, y, theta, v, u, x_d, y_d as f32 [m, m, rad, m/s, rad/s, m, m], mode u8
+  (common.vocabulary.Mode), flags u8 (common.vocabulary.StateFlags), 6 reserved zero bytes.
 * OBSTACLES (``.../robot/<id>/obstacles``): count u16, then count x (cx, cy, r) f32 [m].
 * TRUTH (``.../robot/<id>/truth``, SITL only): x, y, theta, v, u as f64.
 * WHEELS (``.../robot/<id>/wheels``, multi-host SITL only): the emulated drivers' wheel
@@ -35,6 +35,8 @@ from typing import Generic, NamedTuple, TypeVar
 
 import numpy as np
 
+from common.vocabulary import StateFlags
+
 VERSION = 1
 
 HEADER = struct.Struct("<BBHId")
@@ -53,12 +55,6 @@ class PayloadKind(enum.IntEnum):
     TRUTH = 3
     MISSION = 4
     WHEELS = 5
-
-
-class StateFlags(enum.IntFlag):
-    ARMED = 1
-    HOLD = 2          # commanded to stand still
-    FAILSAFE = 4      # a timeout or fault put the agent in its safe state
 
 
 _FLAGS = tuple(StateFlags(bits) for bits in range(8))     # decoded flags, built once
