@@ -126,7 +126,7 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
 
     mem_f, mem_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
     new_f, new_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
-    cmd, ref = np.zeros((n, 3)), np.zeros((n, 4))
+    cmd, ref, near = np.zeros((n, 3)), np.zeros((n, 4)), np.zeros((n, 2))
     wheels = np.zeros((n, 2))
     pos = np.zeros((S + 1, n, 2))
     dmin, cmin = np.zeros(S + 1), np.zeros(S + 1)
@@ -139,7 +139,8 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             watch_k = np.full((n, watch_cap), -1, np.int64)
             need, need_watch = k.control(pose, mem_f, mem_i, offsets, motion, t, obs, params, T,
                                          options.sensing_range, control.a, reach, cap,
-                                         watch_cap, cmd, ref, new_f, new_i, watch_j, watch_k)
+                                         watch_cap, cmd, ref, new_f, new_i, near, watch_j,
+                                         watch_k)
             if need <= cap and need_watch <= watch_cap:
                 break
             cap, watch_cap = max(cap, int(need)), max(watch_cap, int(need_watch))
@@ -155,15 +156,19 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             rec_mode[r], rec_ref[r] = mode, ref[:, :2]
         last = step == steps
         first = 0 if step == 0 else 1
+        # the pairs and obstacles that could be the closest or closer than a this period
+        pair_limit = max(float(near[:, 0].min(initial=np.inf)), control.a) + 4.0 * reach
+        clear_limit = max(float(near[:, 1].min(initial=np.inf)), 0.0) + 2.0 * reach
+        watched = (near[:, 0] <= pair_limit) | (near[:, 1] <= clear_limit)
         if last:
             pos[0] = pose[:, :2]
         else:
             k.advance(pose, cmd, wheels, ideal, robot.wheel_radius, robot.wheel_base,
-                      robot.wheel_speed_limit, robot.wheel_ramp, dt, S, pos)
+                      robot.wheel_speed_limit, robot.wheel_ramp, dt, S, watched, pos)
         n_sub = 1 if last else S + 1
         hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
-        k.geometry(pos[:n_sub], watch_j, watch_k, obs, control.a, first, dmin, cmin, hit_j,
-                   hit_k)
+        k.geometry(pos[:n_sub], watch_j, watch_k, obs, control.a, first, pair_limit,
+                   clear_limit, watched, dmin, cmin, hit_j, hit_k)
         pairs = [(int(ids[i]), int(ids[watch_j[i, w]])) for i, w in zip(*np.nonzero(hit_j))]
         inside = [int(ids[i]) for i in np.flatnonzero(hit_k.any(axis=1))]
         for s in range(first, n_sub):

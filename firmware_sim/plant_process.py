@@ -142,7 +142,7 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
         cache = Latest(session, keys.wheels("*"), WheelsMsg.decode, clock.wall,
                        capacity=64 * len(scenario.ids))
         robots = [PlantRobot(int(rid), tuple(map(float, pose)),
-                             RemoteWheels(cache, int(rid), clock.wall))
+                             RemoteWheels(cache, int(rid), clock.wall), by_positions=True)
                   for rid, pose in zip(scenario.ids, scenario.poses)]
         stats = _run_plant(session, keys, robots, scenario, dt, clock)
         cache.close()

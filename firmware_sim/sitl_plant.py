@@ -48,7 +48,8 @@ class DriverPair(Protocol):
     def step(self, dt: float) -> None: ...              # advance the axes by dt [s]
     def wheel_state(self) -> tuple[float, float, float, float] | None: ...
     # (right, left) positions [rev], then (right, left) actual speeds [rev/s]; None while
-    # nothing is known yet (remote drivers not heard from). The plant reads only the speeds.
+    # nothing is known yet (remote drivers not heard from). The plant reads the speeds of
+    # local drivers and the positions of remote ones (PlantRobot.by_positions).
     def close(self) -> None: ...
 
 
@@ -59,6 +60,11 @@ class PlantRobot:
     drivers: DriverPair
     v: float = 0.0            # m/s, actual (held over the last physics step)
     u: float = 0.0            # rad/s, actual (held over the last physics step)
+    # remote drivers (multi-host world): the robot rolls through the arc its wheels' reported
+    # positions turned since the last report, so a late or lost report delays the motion
+    # but never loses it
+    by_positions: bool = False
+    last_turns: tuple[float, float] | None = None     # rev, (right, left) last applied
 
 
 class SitlPlant:
@@ -95,6 +101,9 @@ class SitlPlant:
             state = rb.drivers.wheel_state()
             if state is None:
                 continue
+            if rb.by_positions:
+                self._roll_to(rb, state[0], state[1], dt)
+                continue
             _, _, right, left = state            # speeds at the step's end [rev/s]
             v, u = body_velocity(TWO_PI * right, TWO_PI * left, r.wheel_radius, r.wheel_base)
             rb.v, rb.u = float(v), float(u)
@@ -109,6 +118,18 @@ class SitlPlant:
         if now_m >= self._next_obstacles:
             self._next_obstacles = now_m + self.obstacles_period
             self.publish_obstacles(now_w)
+
+    def _roll_to(self, rb: PlantRobot, right: float, left: float, dt: float) -> None:
+        """Move ``rb`` through the arc its wheels turned from ``rb.last_turns`` to (right,
+        left) [rev]."""
+        last, rb.last_turns = rb.last_turns, (right, left)
+        if last is None:
+            return
+        r = self.params
+        dist, dtheta = body_velocity(TWO_PI * (right - last[0]), TWO_PI * (left - last[1]),
+                                     r.wheel_radius, r.wheel_base)
+        rb.v, rb.u = dist / dt, dtheta / dt
+        rb.pose = arc_step(*rb.pose, dist, dtheta)
 
     def publish_obstacles(self, now_w: float) -> None:
         """Each robot's detections: obstacles whose surface is within sensing range."""

@@ -62,28 +62,27 @@ def _cells_around(x: float, y: float, x0: float, y0: float, cell: float, nx: int
     return max(ix - 1, 0), min(ix + 1, nx - 1), max(iy - 1, 0), min(iy + 1, ny - 1)
 
 
-def sense_neighbours(i: int, pose: np.ndarray, sensing_range: float, grid: Grid, cap: int,
-                     out_x: np.ndarray, out_y: np.ndarray, out_d: np.ndarray,
-                     out_j: np.ndarray) -> int:
-    """The robots whose centre is within ``sensing_range`` [m] of robot i's (``grid`` of
-    the swarm's positions): their positions, distances and indices in the first entries of
-    the outputs (at most ``cap``); returns how many there are."""
+def sense_neighbours(i: int, x: float, y: float, sorted_xy: np.ndarray, sensing_range: float,
+                     grid: Grid, cap: int, out_x: np.ndarray, out_y: np.ndarray,
+                     out_d: np.ndarray, out_j: np.ndarray) -> int:
+    """The robots whose centre is within ``sensing_range`` [m] of robot i at (x, y):
+    their positions, distances and indices in the first entries of the outputs (at most
+    ``cap``); returns how many there are. ``grid`` holds the swarm's positions and
+    ``sorted_xy`` (N, 2) those positions in the grid's order (contiguous reads per cell)."""
     start, order, x0, y0, cell, nx, ny = grid
-    x, y = pose[i, 0], pose[i, 1]
     r2 = sensing_range * sensing_range
     m = 0
     lo_x, hi_x, lo_y, hi_y = _cells_around(x, y, x0, y0, cell, nx, ny)
     for cx in range(lo_x, hi_x + 1):
-        for c in range(cx * ny + lo_y, cx * ny + hi_y + 1):
-            for q in range(start[c], start[c + 1]):
-                j = order[q]
-                dx, dy = pose[j, 0] - x, pose[j, 1] - y
-                d2 = dx * dx + dy * dy
-                if j != i and d2 <= r2:
-                    if m < cap:
-                        out_x[m], out_y[m] = pose[j, 0], pose[j, 1]
-                        out_d[m], out_j[m] = math.sqrt(d2), j
-                    m += 1
+        # the cells (cx, lo_y..hi_y) are consecutive in the grid's order
+        for q in range(start[cx * ny + lo_y], start[cx * ny + hi_y + 1]):
+            dx, dy = sorted_xy[q, 0] - x, sorted_xy[q, 1] - y
+            d2 = dx * dx + dy * dy
+            if d2 <= r2 and order[q] != i:
+                if m < cap:
+                    out_x[m], out_y[m] = sorted_xy[q, 0], sorted_xy[q, 1]
+                    out_d[m], out_j[m] = math.sqrt(d2), order[q]
+                m += 1
     return m
 
 
@@ -97,15 +96,14 @@ def sense_obstacles(x: float, y: float, obs: np.ndarray, sensing_range: float, g
     k = 0
     lo_x, hi_x, lo_y, hi_y = _cells_around(x, y, x0, y0, cell, nx, ny)
     for cx in range(lo_x, hi_x + 1):
-        for c in range(cx * ny + lo_y, cx * ny + hi_y + 1):
-            for q in range(start[c], start[c + 1]):
-                kk = order[q]
-                dx, dy = obs[kk, 0] - x, obs[kk, 1] - y
-                if math.sqrt(dx * dx + dy * dy) - obs[kk, 2] <= sensing_range:
-                    if k < cap:
-                        out_x[k], out_y[k], out_r[k], out_k[k] = (obs[kk, 0], obs[kk, 1],
-                                                                  obs[kk, 2], kk)
-                    k += 1
+        for q in range(start[cx * ny + lo_y], start[cx * ny + hi_y + 1]):
+            kk = order[q]
+            dx, dy = obs[kk, 0] - x, obs[kk, 1] - y
+            if math.sqrt(dx * dx + dy * dy) - obs[kk, 2] <= sensing_range:
+                if k < cap:
+                    out_x[k], out_y[k], out_r[k], out_k[k] = (obs[kk, 0], obs[kk, 1],
+                                                              obs[kk, 2], kk)
+                k += 1
     return k
 
 
@@ -113,8 +111,8 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
             motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams, period: float,
             sensing_range: float, a: float, reach: float, cap: int, watch_cap: int,
             out_cmd: np.ndarray, out_ref: np.ndarray, out_mem_f: np.ndarray,
-            out_mem_i: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray
-            ) -> tuple[int, int]:
+            out_mem_i: np.ndarray, out_near: np.ndarray, watch_j: np.ndarray,
+            watch_k: np.ndarray) -> tuple[int, int]:
     """Sense and run the law for every robot.
 
     pose (N, 3) [m, m, rad]; memory of :class:`LawMemory` as floats (N, 5): prev_ex,
@@ -122,7 +120,8 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
     offsets (N, 2) [m] and motion (5,) = centre0 x, y [m], velocity x, y [m/s], omega
     [rad/s] of the formation; obs (K, 3) = obstacle centre x, y and radius [m].
     Out: out_cmd (N, 3) = v [m/s], u [rad/s], mode; out_ref (N, 4) = p_d, p_d_dot; the new
-    memory; the watch lists: watch_j (N, watch_cap) the robots j > i whose distance is within
+    memory; out_near (N, 2) [m]: the distance to the nearest neighbour and the smallest
+    clearance to an obstacle in range (inf: none); the watch lists: watch_j (N, watch_cap) the robots j > i whose distance is within
     max(nearest of i, a) + 4 reach (``reach`` [m]: the farthest a robot moves in a period),
     watch_k (N, watch_cap) the obstacles whose clearance is within the robot's smallest + 2
     reach; -1 ends a list. Returns the capacities needed: (neighbours or obstacles sensed
@@ -131,6 +130,9 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
     """
     n, k_obs = len(pose), len(obs)
     grid = build_grid(pose[:, 0], pose[:, 1], sensing_range, 4 * n + 64)
+    sorted_xy = np.empty((n, 2))
+    for q in range(n):
+        sorted_xy[q, 0], sorted_xy[q, 1] = pose[grid[1][q], 0], pose[grid[1][q], 1]
     max_r = obs[:, 2].max() if k_obs else 0.0
     obs_grid = build_grid(obs[:, 0], obs[:, 1], sensing_range + max_r, 4 * k_obs + 64)
     chunks = min(n, 64)
@@ -143,8 +145,8 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
         o_k = np.empty(cap, np.int64)
         for i in range(chunk * n // chunks, (chunk + 1) * n // chunks):
             x, y = pose[i, 0], pose[i, 1]
-            m = sense_neighbours(i, pose, sensing_range, grid, cap, nbr_x, nbr_y, nbr_d,
-                                 nbr_j)
+            m = sense_neighbours(i, x, y, sorted_xy, sensing_range, grid, cap, nbr_x, nbr_y,
+                                 nbr_d, nbr_j)
             k = sense_obstacles(x, y, obs, sensing_range, obs_grid, cap, o_x, o_y, o_r, o_k)
             need[chunk] = max(need[chunk], m, k)
             if m > cap or k > cap:
@@ -166,6 +168,7 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
             nearest = math.inf
             for q in range(m):
                 nearest = min(nearest, nbr_d[q])
+            out_near[i, 0] = nearest
             limit = max(nearest, a) + 4.0 * reach
             w = 0
             for q in range(m):
@@ -179,6 +182,7 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
             for q in range(k):
                 dx, dy = o_x[q] - x, o_y[q] - y
                 lowest = min(lowest, math.sqrt(dx * dx + dy * dy) - o_r[q])
+            out_near[i, 1] = lowest
             wk = 0
             for q in range(k):
                 dx, dy = o_x[q] - x, o_y[q] - y
@@ -194,21 +198,22 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
 
 def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
             wheel_radius: float, wheel_base: float, speed_limit: float, ramp: float,
-            dt: float, substeps: int, out_pos: np.ndarray) -> None:
+            dt: float, substeps: int, watched: np.ndarray, out_pos: np.ndarray) -> None:
     """Move every robot through ``substeps`` physics steps of ``dt`` [s]; pose updated.
 
     ``ideal``: the commands (v, u) of ``cmd`` applied exactly (one exact arc from the
-    period's start, evaluated at each substep). Otherwise through the wheel drivers: set-
-    points of :func:`wheel_command` (speed limit [rev/s]), wheel speeds ``wheels`` (N, 2)
-    (right, left) [rev/s] ramped at ``ramp`` [rev/s^2] and held over each substep.
-    out_pos (substeps + 1, N, 2): positions at the period's start and after each substep.
+    period's start, evaluated at each substep; only at the period's end for robots not
+    ``watched``). Otherwise through the wheel drivers: set-points of :func:`wheel_command`
+    (speed limit [rev/s]), wheel speeds ``wheels`` (N, 2) (right, left) [rev/s] ramped at
+    ``ramp`` [rev/s^2] and held over each substep. out_pos (substeps + 1, N, 2): positions
+    at the period's start and after each substep (of the watched robots at least).
     """
     for i in prange(len(pose)):
         x, y, th = pose[i, 0], pose[i, 1], pose[i, 2]
         v, u = cmd[i, 0], cmd[i, 1]
         out_pos[0, i, 0], out_pos[0, i, 1] = x, y
         if ideal:
-            for s in range(1, substeps + 1):
+            for s in range(1 if watched[i] else substeps, substeps + 1):
                 h = s * dt
                 px, py, pth = arc_step(x, y, th, v * h, u * h)
                 out_pos[s, i, 0], out_pos[s, i, 1] = px, py
@@ -228,32 +233,49 @@ def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
 
 
 def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.ndarray,
-             a: float, first: int, out_dmin: np.ndarray, out_cmin: np.ndarray,
+             a: float, first: int, pair_limit: float, clear_limit: float,
+             watched: np.ndarray, out_dmin: np.ndarray, out_cmin: np.ndarray,
              hit_j: np.ndarray, hit_k: np.ndarray) -> None:
     """Closest pair and smallest clearance at each substep s >= ``first`` of ``pos`` (S, N,
-    2), over the watch lists of :func:`control`: out_dmin, out_cmin (S,) [m] (inf: none).
-    hit_j / hit_k (N, cap) are set where a watched pair came closer than a / a robot centre
-    entered a watched obstacle."""
+    2), over the watch lists of :func:`control` of the ``watched`` robots, for the pairs
+    no farther than ``pair_limit`` [m] and the obstacles no farther than ``clear_limit`` [m]
+    at the period's start: out_dmin, out_cmin (S,) [m] (inf: none). hit_j / hit_k (N, cap)
+    are set where a watched pair came closer than a / a robot centre entered a watched
+    obstacle.
+
+    Robots move at most ``reach`` per period, so with pair_limit = max(closest pair, a) +
+    4 reach and clear_limit = max(smallest clearance, 0) + 2 reach the minima and the hits
+    found are exact.
+    """
     n_sub, n = pos.shape[0], pos.shape[1]
     d_robot = np.full((n_sub, n), np.inf)
     c_robot = np.full((n_sub, n), np.inf)
     for i in prange(n):
-        for s in range(first, n_sub):
-            x, y = pos[s, i, 0], pos[s, i, 1]
-            for w in range(watch_j.shape[1]):
-                j = watch_j[i, w]
-                if j < 0:
-                    break
-                dx, dy = pos[s, j, 0] - x, pos[s, j, 1] - y
+        if not watched[i]:
+            continue
+        x0, y0 = pos[0, i, 0], pos[0, i, 1]
+        for w in range(watch_j.shape[1]):
+            j = watch_j[i, w]
+            if j < 0:
+                break
+            dx, dy = pos[0, j, 0] - x0, pos[0, j, 1] - y0
+            if math.sqrt(dx * dx + dy * dy) > pair_limit:
+                continue
+            for s in range(first, n_sub):
+                dx, dy = pos[s, j, 0] - pos[s, i, 0], pos[s, j, 1] - pos[s, i, 1]
                 d = math.sqrt(dx * dx + dy * dy)
                 d_robot[s, i] = min(d_robot[s, i], d)
                 if d < a:
                     hit_j[i, w] = True
-            for w in range(watch_k.shape[1]):
-                k = watch_k[i, w]
-                if k < 0:
-                    break
-                dx, dy = obs[k, 0] - x, obs[k, 1] - y
+        for w in range(watch_k.shape[1]):
+            k = watch_k[i, w]
+            if k < 0:
+                break
+            dx, dy = obs[k, 0] - x0, obs[k, 1] - y0
+            if math.sqrt(dx * dx + dy * dy) - obs[k, 2] > clear_limit:
+                continue
+            for s in range(first, n_sub):
+                dx, dy = obs[k, 0] - pos[s, i, 0], obs[k, 1] - pos[s, i, 1]
                 c = math.sqrt(dx * dx + dy * dy) - obs[k, 2]
                 c_robot[s, i] = min(c_robot[s, i], c)
                 if c < 0.0:

@@ -129,7 +129,7 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
     for k in range(20):
         plant.step(dt, dt * k, 100.0 + dt * k)
         advance(pose, np.array([[v_cmd, u_cmd, 0.0]]), wheels, False, robot.wheel_radius,
-                robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1,
+                robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1, np.ones(1, bool),
                 np.zeros((2, 1, 2)))
         turns += wheels[0] * dt
         v, u = body_velocity(TWO_PI * wheels[0, 0], TWO_PI * wheels[0, 1], robot.wheel_radius,
@@ -223,3 +223,38 @@ def test_sitl_plant_reads_only_the_buses_with_frames_waiting():
     finally:
         host.shutdown()
         plant.close()
+
+
+class _LateReports(_Wheels):
+    """Remote drivers whose reports reach the world only every ``every`` steps (the
+    positions of the last report in between)."""
+
+    def __init__(self, right, left, every):
+        super().__init__(right, left)
+        self.every, self.reported = every, None
+
+    def wheel_state(self):
+        if self.reported is None or self.k % self.every == 0:
+            self.reported = (*self.pos, *self.speeds)
+        return self.reported
+
+
+def test_remote_robot_rolls_through_its_reported_wheel_turns_late_or_not():
+    """A world whose drivers are on other hosts: late reports delay the motion but never
+    lose it (the robot ends where its wheels' turns put it)."""
+    from firmware_sim.sitl_plant import PlantRobot
+
+    robot = RobotParams()
+    prompt = PlantRobot(1, (0.0, 0.0, 0.3), _LateReports(2.0, 1.0, every=1), by_positions=True)
+    late = PlantRobot(2, (0.0, 0.0, 0.3), _LateReports(2.0, 1.0, every=7), by_positions=True)
+    plant = _plant([prompt, late], robot)
+    for k in range(42):
+        plant.step(0.005, 0.005 * k, 100.0 + 0.005 * k)
+    assert late.pose == pytest.approx(prompt.pose, abs=1e-12)
+    assert prompt.pose[0] > 0.3                        # it did move (~0.4 m)
+    # the speed-driven robot of the same wheels agrees with the position-driven ones
+    local = PlantRobot(3, (0.0, 0.0, 0.3), _Wheels(2.0, 1.0))
+    plant = _plant([local], robot)
+    for k in range(42):
+        plant.step(0.005, 0.005 * k, 100.0 + 0.005 * k)
+    assert local.pose == pytest.approx(prompt.pose, abs=0.02)

@@ -13,7 +13,8 @@ def _advance(pose, v, u, wheels, ideal, robot, dt, substeps):
     pos = np.zeros((substeps + 1, len(pose), 2))
     cmd = np.column_stack([v, u, np.zeros(len(pose))])
     advance(pose, cmd, wheels, ideal, robot.wheel_radius, robot.wheel_base,
-            robot.wheel_speed_limit, robot.wheel_ramp, dt, substeps, pos)
+            robot.wheel_speed_limit, robot.wheel_ramp, dt, substeps,
+            np.ones(len(pose), bool), pos)
     return pos
 
 

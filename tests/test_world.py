@@ -15,8 +15,9 @@ def sensed(pos, obs, rng_m=8.0, cap=64):
                        4 * len(o) + 64)
     bufs = [np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap, np.int64)]
     nb, ob = set(), set()
+    sorted_xy = pos[grid[1]]
     for i in range(len(pos)):
-        m = sense_neighbours(i, pose, rng_m, grid, cap, *bufs)
+        m = sense_neighbours(i, pos[i, 0], pos[i, 1], sorted_xy, rng_m, grid, cap, *bufs)
         assert m <= cap
         nb |= {(i, int(j)) for j in bufs[3][:m]}
         assert np.allclose(bufs[2][:m], np.hypot(*(pos[bufs[3][:m]] - pos[i]).T))
@@ -55,7 +56,7 @@ def test_a_full_buffer_reports_how_many_there_are():
     pose = np.column_stack([pos, np.zeros(10)])
     grid = build_grid(pose[:, 0], pose[:, 1], 8.0, 100)
     bufs = [np.empty(3), np.empty(3), np.empty(3), np.empty(3, np.int64)]
-    assert sense_neighbours(0, pose, 8.0, grid, 3, *bufs) == 9
+    assert sense_neighbours(0, 0.0, 0.0, pos[grid[1]], 8.0, grid, 3, *bufs) == 9
 
 
 def test_clearance():
