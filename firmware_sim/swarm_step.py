@@ -56,10 +56,15 @@ def build_grid(px: np.ndarray, py: np.ndarray, cell: float, max_cells: int) -> G
 
 def _cells_around(x: float, y: float, x0: float, y0: float, cell: float, nx: int, ny: int
                   ) -> tuple[int, int, int, int]:
-    """(ix_lo, ix_hi, iy_lo, iy_hi): the 3 x 3 block of cells around (x, y), clipped."""
+    """(ix_lo, ix_hi, iy_lo, iy_hi): the 3 x 3 block of cells around (x, y), clipped to the
+    grid; ix_lo > ix_hi when the block misses the grid (a point far outside it)."""
     ix = int(math.floor((x - x0) / cell))
     iy = int(math.floor((y - y0) / cell))
-    return max(ix - 1, 0), min(ix + 1, nx - 1), max(iy - 1, 0), min(iy + 1, ny - 1)
+    lo_x, hi_x = max(ix - 1, 0), min(ix + 1, nx - 1)
+    lo_y, hi_y = max(iy - 1, 0), min(iy + 1, ny - 1)
+    if lo_y > hi_y:
+        hi_x = lo_x - 1
+    return lo_x, hi_x, lo_y, hi_y
 
 
 def sense_neighbours(i: int, x: float, y: float, sorted_xy: np.ndarray, sensing_range: float,

@@ -63,3 +63,13 @@ def test_clearance():
     obs = Obstacles(np.array([[0.0, 0.0]]), np.array([2.0]))
     assert obs.clearance(np.array([[3.0, 4.0]]))[0, 0] == pytest.approx(3.0)
     assert len(Obstacles.empty()) == 0
+
+
+@pytest.mark.parametrize("x, y", [(0.0, 500.0), (0.0, -500.0), (500.0, 0.0), (-500.0, 0.0),
+                                  (30.0, 29.0)])
+def test_a_robot_outside_the_obstacle_grid_senses_only_what_is_in_range(x, y):
+    """The obstacles' grid spans their centres only: a robot beyond it in any direction
+    looks at no cell outside it (and still finds an obstacle just beyond the edge)."""
+    obs = Obstacles(np.array([[0.0, 0.0], [10.0, 10.0], [20.0, 20.0]]), np.ones(3))
+    pos = np.array([[x, y]])
+    assert sensed(pos, obs) == brute(pos, obs)
