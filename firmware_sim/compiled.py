@@ -7,14 +7,22 @@ function of those modules is replaced by its compiled version, and compiles them
 by hand and nothing is written twice: the compiled and the interpreted runs execute the same
 source, and ``tests/test_compiled.py`` checks that they give equal results.
 
+numba caches the machine code, but it does not notice that a function it compiled calls a
+function of another file that has changed since. So the cache lives in a folder named
+after a hash of all the sources (``$BOUNDSWARM_NUMBA_CACHE``, else
+``~/.cache/boundswarm/numba``): an edited law is compiled afresh, never taken stale.
+
 numba is an optional dependency (the ``sim`` extra); agents never import this module.
 """
 from __future__ import annotations
 
 import functools
+import hashlib
 import importlib
 import logging
+import os
 import types
+from pathlib import Path
 from typing import Any
 
 log = logging.getLogger(__name__)
@@ -39,13 +47,33 @@ def use_threads(parallel: bool) -> None:
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS if parallel else 1)
 
 
+def cache_dir(modules: list[types.ModuleType], numba_version: str) -> Path:
+    """The folder of the machine code compiled from ``modules``' current sources."""
+    digest = hashlib.sha256(numba_version.encode())
+    for m in modules:
+        digest.update(Path(m.__file__ or "").read_bytes())
+    root = os.environ.get("BOUNDSWARM_NUMBA_CACHE")
+    base = Path(root) if root else Path.home() / ".cache" / "boundswarm" / "numba"
+    return base / digest.hexdigest()[:16]
+
+
 @functools.lru_cache(maxsize=1)
 def kernels() -> types.SimpleNamespace:
-    """The compiled functions of :data:`SOURCES`, by name (compiled at their first call;
-    numba caches the machine code next to the sources)."""
+    """The compiled functions of :data:`SOURCES`, by name (compiled at their first call, or
+    loaded from the cache of these very sources)."""
     import numba
 
     modules = [importlib.import_module(name) for name in SOURCES]
+    previous = numba.config.CACHE_DIR
+    numba.config.CACHE_DIR = str(cache_dir(modules, numba.__version__))
+    try:
+        return _compile(modules, numba)
+    finally:
+        numba.config.CACHE_DIR = previous
+
+
+def _compile(modules: list[types.ModuleType], numba: Any) -> types.SimpleNamespace:
+    """numba.njit each function of ``modules`` in globals that name the compiled ones."""
     namespaces = {m.__name__: dict(vars(m)) for m in modules}
     for ns in namespaces.values():
         if "prange" in ns:

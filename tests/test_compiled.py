@@ -58,3 +58,20 @@ def test_compiled_needs_numba(monkeypatch):
     with pytest.raises(RuntimeError, match="numba is not installed"):
         simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
                  SimOptions(duration=0.1, compiled=True))
+
+
+def test_the_cache_follows_every_source(tmp_path, monkeypatch):
+    """An edited law (not only an edited caller) gets a fresh cache: numba alone would load
+    the caller's stale machine code."""
+    import types
+
+    monkeypatch.setenv("BOUNDSWARM_NUMBA_CACHE", str(tmp_path))
+    files = [tmp_path / "law.py", tmp_path / "step.py"]
+    for f in files:
+        f.write_text("x = 1\n")
+    modules = [types.SimpleNamespace(__file__=str(f)) for f in files]
+    first = compiled.cache_dir(modules, "0.60")
+    assert first.parent == tmp_path and compiled.cache_dir(modules, "0.60") == first
+    files[0].write_text("x = 2\n")
+    assert compiled.cache_dir(modules, "0.60") != first
+    assert compiled.cache_dir(modules, "0.61") != compiled.cache_dir(modules, "0.60")
