@@ -7,7 +7,8 @@ from common.vocabulary import Mode
 from agent.loop import FixedRateLoop
 from agent.node import Agent, AgentMode
 from agent.settings import AgentSettings
-from fakes import MirrorMotor, SharedSwarm, SimClock
+from fakes import MirrorMotor, SharedSwarm
+from helpers import SimClock
 from transport.payloads import MissionMsg, ObstaclesMsg, StateFlags
 
 

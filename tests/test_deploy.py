@@ -12,17 +12,12 @@ from pathlib import Path
 import pytest
 import zenoh
 from cryptography import x509
+from helpers import free_port
 
 from hil.deploy import DeployError, deploy, load_manifest
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV_BIN = Path(sys.executable).parent
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 MANIFEST = """version = 1
