@@ -20,9 +20,10 @@ Swarm manifest (TOML, ``version = 1``)::
 ``boundswarm deploy MANIFEST --out DIR`` writes ``DIR/robot-<id>/`` for each robot (agent
 config, Zenoh client config with mutual TLS, the robot's certificate and private key, the
 CA certificate, a MAVLink signing key, a systemd unit whose documentation is the bundle's
-installed README, an install script, the project's wheel) and ``DIR/ground/`` (the router's config with TLS and access control, its
-certificate and key, the CA, the scenario, notes for the ground-control station). The
-access-control rules let each robot publish only under its own keys.
+README (installed with it), an install script, the project's wheel) and ``DIR/ground/``
+(the router's config with TLS and access control, its certificate and key, the CA, the
+scenario, notes for the ground-control station). The access-control rules let each robot
+publish only under its own keys.
 """
 from __future__ import annotations
 

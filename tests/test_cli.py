@@ -103,20 +103,21 @@ def test_an_invalid_option_value_exits_2_naming_the_option(capsys):
     assert exc.value.code == 2 and "--swarm" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("error", [ValueError("operands could not be broadcast\ntogether"),
+                                   OSError(28, "No space left on device")])
 def test_an_internal_error_exits_1_with_one_line_and_no_traceback(tmp_path, capsys,
-                                                                  monkeypatch):
-    """A bug (here a ValueError and an OSError from inside the simulator) is not the user's
+                                                                  monkeypatch, error):
+    """A bug (here a ValueError or an OSError from inside the simulator) is not the user's
     input: exit 1, one line naming the error, no traceback."""
     from firmware_sim import batch
-    for error in (ValueError("operands could not be broadcast\ntogether"),
-                  OSError(28, "No space left on device")):
-        def broken(*args, **kwargs):
-            raise error
-        monkeypatch.setattr(batch, "simulate", broken)
-        assert main(["sim", str(SCENARIOS / "paper.toml"), "--out", str(tmp_path / "o")]) == 1
-        err = capsys.readouterr().err
-        assert err.count("\n") == 1 and "Traceback" not in err, err
-        assert err.startswith("boundswarm sim: failed: ") and type(error).__name__ in err
+
+    def broken(*args, **kwargs):
+        raise error
+    monkeypatch.setattr(batch, "simulate", broken)
+    assert main(["sim", str(SCENARIOS / "paper.toml"), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("boundswarm sim: failed: ") and type(error).__name__ in err
 
 
 def test_verbose_adds_the_traceback_of_an_internal_error(tmp_path, capsys, monkeypatch):
