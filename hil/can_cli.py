@@ -176,7 +176,7 @@ def armed_writer(bus: can.BusABC, listen: float = 0.5) -> bool:
         except FrameError:
             continue
         if f.cmd == Cmd.HEARTBEAT and not f.rtr and \
-                f.signals.get("Axis_State") == AxisState.CLOSED_LOOP_CONTROL:
+                f.signals.get("Axis_State") == AxisState["CLOSED_LOOP_CONTROL"]:
             closed = True
         if f.cmd == Cmd.SET_INPUT_VEL:
             commands = True

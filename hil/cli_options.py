@@ -67,9 +67,7 @@ def zenoh_file(path: str) -> zenoh.Config:
         raise BadInput(str(exc)) from None
 
 
-def zenoh_client(config: str | None, connect: list[str] | None) -> zenoh.Config | None:
-    """The client config that ``config`` or ``connect`` names, None if neither is given."""
+def zenoh_client(config: str | None, connect: list[str] | None) -> zenoh.Config:
+    """The client config in file ``config``, else one that connects to ``connect``."""
     from transport.zenoh_link import session_config
-    if config:
-        return zenoh_file(config)
-    return session_config("client", connect=connect) if connect else None
+    return zenoh_file(config) if config else session_config("client", connect=connect or [])

@@ -252,9 +252,9 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
         # certificate paths relative to the working directory (the unit's is ETC)
         (b / "zenoh.json5").write_text(json.dumps(client_config(manifest, f"robot-{r.id}", "."),
                                                   indent=2))
-        k = index[r.id]
+        x, y, theta = map(float, sc.poses[index[r.id]])
         settings = AgentSettings(
-            robot_id=r.id, swarm=manifest.swarm, initial_pose=tuple(map(float, sc.poses[k])),
+            robot_id=r.id, swarm=manifest.swarm, initial_pose=(x, y, theta),
             control=sc.control, robot=sc.robot,
             can=CanSettings(interface="socketcan", channel=r.can_interface, bitrate=r.bitrate),
             zenoh=ZenohSettings(mode="client", connect=(), config="zenoh.json5"),

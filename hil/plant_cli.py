@@ -124,7 +124,8 @@ def run_drivers(args: argparse.Namespace, console: Console) -> int:
     from firmware_sim.odrive_sim import DriverPair
     from firmware_sim.plant_process import run_drivers_only
     from transport.canbus import open_bus
-    conf = zenoh_client(args.zenoh_config, args.zenoh_connect)
+    conf = (zenoh_client(args.zenoh_config, args.zenoh_connect)
+            if args.zenoh_config or args.zenoh_connect else None)
     if conf is not None and (args.robot is None or args.swarm is None):
         raise BadInput("with --zenoh-config or --zenoh-connect, give --robot and --swarm")
     bus = open_bus(args.can_interface, args.can_channel, port=args.can_port)

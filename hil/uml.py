@@ -84,6 +84,11 @@ def kernel() -> tuple[str, str] | None:
     return (system, "/usr/lib/uml/modules") if system else None
 
 
+def _kernel_name() -> str:
+    found = kernel()
+    return found[0] if found else "(no UML kernel)"
+
+
 def available() -> str | None:
     """None when UML can run here, else the reason it cannot."""
     if kernel() is None:
@@ -99,10 +104,10 @@ def run_script(script: str, vcans: int = 1, timeout: float = 120.0, mem_mb: int 
 
     The script runs as root in ``cwd`` (read-only) and may write to ``$UML_WORK``.
     """
-    reason = available()
-    if reason:
-        raise UmlUnavailable(reason)
-    executable, moddir = kernel()
+    reason, found = available(), kernel()
+    if reason or found is None:
+        raise UmlUnavailable(reason or "no UML kernel")
+    executable, moddir = found
     with tempfile.TemporaryDirectory(prefix="boundswarm-uml-") as tmp:
         work = Path(tmp)
         (work / "script.sh").write_text(f"UML_WORK={work}\nexport UML_WORK\n{script}\n")
@@ -139,7 +144,7 @@ def boots() -> str | None:
     if r.returncode == 0 and r.output.strip() == "ok":
         return None
     panic = FP_REGS_PANIC if FP_REGS_PANIC in r.console else "no script exit"
-    return f"UML kernel {kernel()[0]} does not boot here ({panic})"
+    return f"UML kernel {_kernel_name()} does not boot here ({panic})"
 
 
 @functools.lru_cache(maxsize=1)
@@ -242,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     reason = available() or boots()
     if reason is None:
-        print(f"uml: {kernel()[0]} boots")
+        print(f"uml: {_kernel_name()} boots")
         return 0
     print(f"uml: {reason}")
     if args.action == "check" or FP_REGS_PANIC not in reason:
@@ -255,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"uml: could not fetch a newer kernel: {exc}")
         return 1
     reason = boots()
-    print(f"uml: {reason or f'{kernel()[0]} boots'}")
+    print(f"uml: {reason or f'{_kernel_name()} boots'}")
     return 0 if reason is None else 1
 
 
