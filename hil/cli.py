@@ -20,6 +20,7 @@ from hil.exit_codes import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, BadInp
 SUBCOMMANDS = (sim_cli, sitl_cli, agent_cli, plant_cli, can_cli, deploy_cli, router_cli,
                mission_cli, record_cli, report_cli)
 
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="boundswarm", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true",

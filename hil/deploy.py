@@ -179,7 +179,8 @@ INSTALL = """#!/bin/sh
 # Install the boundswarm agent of robot {id} on this computer (run as root).
 set -eu
 HERE=$(cd "$(dirname "$0")" && pwd)
-id -u boundswarm >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin boundswarm
+id -u boundswarm >/dev/null 2>&1 || \\
+    useradd --system --no-create-home --shell /usr/sbin/nologin boundswarm
 python3 -m venv {prefix}/venv
 {prefix}/venv/bin/pip install --quiet "$HERE"/wheels/*.whl
 install -d -m 0750 -o root -g boundswarm {etc} {etc}/certs

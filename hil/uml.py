@@ -25,6 +25,7 @@ import argparse
 import functools
 import hashlib
 import io
+import logging
 import lzma
 import os
 import shutil
@@ -37,6 +38,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hil.apt_sources import debian_mirror
+
+log = logging.getLogger(__name__)
 
 SYSTEM_KERNEL = "linux"
 LOCAL = Path(__file__).resolve().parent.parent / ".venv" / "uml"   # fetched kernel lives here
@@ -227,7 +230,8 @@ def fetch(dest: Path = LOCAL, suite: str = SUITE, mirror: str | None = None) -> 
     root = dest / "root"
     for package in FETCHED_PACKAGES:
         fields = index[package]
-        print(f"uml: fetching {package} {fields['Version']} from Debian {suite}", flush=True)
+        log.info("fetching %s %s from Debian %s at %s", package, fields["Version"], suite,
+                 mirror)
         data = _download(f"{mirror}/{fields['Filename']}")
         if hashlib.sha256(data).hexdigest() != fields["SHA256"]:
             raise ValueError(f"{package}: SHA256 does not match Debian's index")
@@ -245,6 +249,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hil.uml", description=main.__doc__)
     ap.add_argument("action", choices=["ensure", "check"])
     args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="uml: %(message)s")
     reason = available() or boots()
     if reason is None:
         print(f"uml: {_kernel_name()} boots")
