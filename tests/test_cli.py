@@ -130,9 +130,9 @@ def test_verbose_adds_the_traceback_of_an_internal_error(tmp_path, capsys, monke
     assert "Traceback" in capsys.readouterr().err
 
 
-def test_an_internal_error_in_a_child_process_exits_1_without_traceback(tmp_path):
-    """The same through the installed entry point's module, as a user runs it: a CAN bus
-    that cannot be opened is not bad input (the machine's, not the command line's)."""
+def test_a_bus_that_cannot_be_opened_exits_1_without_traceback():
+    """As a user runs it (a process): a CAN bus that cannot be opened is the machine's
+    failure, not bad input."""
     proc = subprocess.run([sys.executable, "-m", "hil.cli", "plant", "drivers",
                            "--can-interface", "socketcan", "--can-channel", "nocan9"],
                           cwd=ROOT, capture_output=True, text=True, timeout=60)
