@@ -17,6 +17,7 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import can
@@ -25,6 +26,8 @@ from rich.live import Live
 from rich.table import Table
 
 from hil.can_inspect import BusStats
+from hil.cli_options import Subparsers, add_can_options, positive
+from hil.exit_codes import EXIT_BAD_INPUT, EXIT_OK, BadInput
 from transport.canbus import open_bus
 from transport.odrive_frames import AxisState, Cmd, FrameError, decode, message_name
 
@@ -38,17 +41,17 @@ def bus_from_args(args: argparse.Namespace) -> tuple[can.BusABC, str]:
         try:
             manifest = json.loads((Path(args.run) / "manifest.json").read_text())
         except (OSError, ValueError) as exc:
-            raise ValueError(f"{args.run}: no readable manifest.json ({exc})") from None
+            raise BadInput(f"{args.run}: no readable manifest.json ({exc})") from None
         robot = manifest.get("robots", {}).get(str(args.robot))
         if robot is None:
-            raise ValueError(f"{args.run}: no robot {args.robot} in the manifest "
+            raise BadInput(f"{args.run}: no robot {args.robot} in the manifest "
                              f"(robots: {', '.join(manifest.get('robots', {}))})")
         c = robot["can"]
         return (open_bus(c["interface"], c["channel"], port=c.get("port")),
                 f"robot {args.robot} of {args.run}: {c['interface']} {c['channel']}"
                 + (f" port {c['port']}" if c.get("port") else ""))
     if not args.can_channel and args.can_interface != "auto":
-        raise ValueError("name a bus: --can-interface/--can-channel (--can-port), or "
+        raise BadInput("name a bus: --can-interface/--can-channel (--can-port), or "
                          "--run DIR --robot ID")
     return (open_bus(args.can_interface, args.can_channel, port=args.can_port),
             f"{args.can_interface} {args.can_channel or ''}")
@@ -95,7 +98,7 @@ def cmd_monitor(args: argparse.Namespace, console: Console) -> int:
                 _drain(bus, stats, time.time() + 0.25)
                 live.update(_view(stats, time.time(), what), refresh=True)
     except KeyboardInterrupt:
-        return 0
+        return EXIT_OK
     finally:
         bus.shutdown()
 
@@ -112,7 +115,7 @@ def cmd_stats(args: argparse.Namespace, console: Console) -> int:
         print(json.dumps(doc, indent=2))
     else:
         console.print(_view(stats, time.time(), what))
-    return 0
+    return EXIT_OK
 
 
 def cmd_log(args: argparse.Namespace, console: Console) -> int:
@@ -132,14 +135,14 @@ def cmd_log(args: argparse.Namespace, console: Console) -> int:
     finally:
         bus.shutdown()
     console.print(f"{n} frames written to {args.file}")
-    return 0
+    return EXIT_OK
 
 
-def _read_log(source: str):
+def _read_log(source: str) -> Iterable[can.Message]:
     if source == "-":
         return can.CanutilsLogReader(sys.stdin)
     if not Path(source).exists():
-        raise ValueError(f"{source}: no such log file")
+        raise BadInput(f"{source}: no such log file")
     return can.LogReader(source)
 
 
@@ -156,7 +159,7 @@ def cmd_decode(args: argparse.Namespace, console: Console) -> int:
         data = msg.data.hex().upper() if not msg.is_remote_frame else "R"
         print(f"({msg.timestamp:.6f}) {msg.channel or '-'} {msg.arbitration_id:03X}#{data}"
               f"  {text}", flush=True)
-    return 0
+    return EXIT_OK
 
 
 def armed_writer(bus: can.BusABC, listen: float = 0.5) -> bool:
@@ -173,7 +176,7 @@ def armed_writer(bus: can.BusABC, listen: float = 0.5) -> bool:
         except FrameError:
             continue
         if f.cmd == Cmd.HEARTBEAT and not f.rtr and \
-                f.signals.get("Axis_State") == AxisState.CLOSED_LOOP_CONTROL:
+                f.signals.get("Axis_State") == AxisState["CLOSED_LOOP_CONTROL"]:
             closed = True
         if f.cmd == Cmd.SET_INPUT_VEL:
             commands = True
@@ -189,10 +192,10 @@ def cmd_replay(args: argparse.Namespace, console: Console) -> int:
             print(f"boundswarm can replay: refused: {args.file} holds {len(commands)} command "
                   f"frame(s) and an armed agent is writing on {what}; use --force to replay "
                   f"anyway", file=sys.stderr)
-            return 2
+            return EXIT_BAD_INPUT
         sent = replay(bus, frames, args.speed)
         console.print(f"replayed {sent} frames onto {what}")
-        return 0
+        return EXIT_OK
     finally:
         bus.shutdown()
 
@@ -223,12 +226,12 @@ def _is_command(msg: can.Message) -> bool:
     return f.cmd in COMMAND_CMDS and not f.rtr
 
 
-def add_parser(sub, add_can_options) -> None:
+def add_parser(sub: Subparsers) -> None:
     """Register ``can`` and its subcommands on the main parser."""
     can_p = sub.add_parser("can", help="CAN inspection: monitor, stats, log, decode, replay")
     can_sub = can_p.add_subparsers(dest="can_command", required=True)
 
-    def bus_options(p):
+    def bus_options(p: argparse.ArgumentParser) -> None:
         add_can_options(p, default_interface="auto")
         p.add_argument("--can-port", type=int, help="udp_multicast port of the bus")
         p.add_argument("--run", help="SITL run folder (with --robot)")
@@ -261,5 +264,5 @@ def add_parser(sub, add_can_options) -> None:
     p.add_argument("file")
     p.add_argument("--force", action="store_true",
                    help="replay command frames even while an armed agent writes")
-    p.add_argument("--speed", type=float, default=1.0, help="time scale (2: twice as fast)")
+    p.add_argument("--speed", type=positive, default=1.0, help="time scale (2: twice as fast)")
     p.set_defaults(func=cmd_replay)

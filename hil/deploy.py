@@ -19,10 +19,11 @@ Swarm manifest (TOML, ``version = 1``)::
 
 ``boundswarm deploy MANIFEST --out DIR`` writes ``DIR/robot-<id>/`` for each robot (agent
 config, Zenoh client config with mutual TLS, the robot's certificate and private key, the
-CA certificate, a MAVLink signing key, a systemd unit and an install script, the project's
-wheel) and ``DIR/ground/`` (the router's config with TLS and access control, its
-certificate and key, the CA, the scenario, notes for the ground-control station). The
-access-control rules let each robot publish only under its own keys.
+CA certificate, a MAVLink signing key, a systemd unit whose documentation is the bundle's
+README (installed with it), an install script, the project's wheel) and ``DIR/ground/``
+(the router's config with TLS and access control, its certificate and key, the CA, the
+scenario, notes for the ground-control station). The access-control rules let each robot
+publish only under its own keys.
 """
 from __future__ import annotations
 
@@ -46,7 +47,7 @@ ETC = "/etc/boundswarm"
 
 
 class DeployError(ValueError):
-    """A swarm manifest is wrong, or a bundle cannot be written."""
+    """A swarm manifest is wrong, or the scenario it names."""
 
 
 @dataclass(frozen=True)
@@ -147,7 +148,7 @@ REALTIME_PRIORITY = 40      # SCHED_FIFO priority of the control loop on robot c
 
 UNIT = """[Unit]
 Description=boundswarm agent of robot {id}
-Documentation=https://pypi.org/project/boundswarm/
+Documentation=file://{prefix}/README.md
 After=network-online.target
 Wants=network-online.target
 
@@ -178,7 +179,8 @@ INSTALL = """#!/bin/sh
 # Install the boundswarm agent of robot {id} on this computer (run as root).
 set -eu
 HERE=$(cd "$(dirname "$0")" && pwd)
-id -u boundswarm >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin boundswarm
+id -u boundswarm >/dev/null 2>&1 || \\
+    useradd --system --no-create-home --shell /usr/sbin/nologin boundswarm
 python3 -m venv {prefix}/venv
 {prefix}/venv/bin/pip install --quiet "$HERE"/wheels/*.whl
 install -d -m 0750 -o root -g boundswarm {etc} {etc}/certs
@@ -186,6 +188,7 @@ install -m 0640 -o root -g boundswarm "$HERE"/agent.toml "$HERE"/zenoh.json5 {et
 install -m 0644 "$HERE"/certs/ca.pem "$HERE"/certs/robot-{id}.pem {etc}/certs/
 install -m 0640 -o root -g boundswarm "$HERE"/certs/robot-{id}.key {etc}/certs/
 install -m 0640 -o root -g boundswarm "$HERE"/mavlink.key {etc}/
+install -m 0644 "$HERE"/README.md {prefix}/
 install -m 0644 "$HERE"/boundswarm-agent.service /etc/systemd/system/
 systemctl daemon-reload
 systemctl enable boundswarm-agent.service
@@ -199,8 +202,8 @@ def build_wheel(out: Path) -> Path:
     proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps",
                            "--wheel-dir", str(out), str(ROOT)], capture_output=True, text=True)
     wheels = sorted(out.glob("boundswarm-*.whl"))
-    if proc.returncode != 0 or not wheels:
-        raise DeployError(f"could not build the boundswarm wheel: {proc.stderr[-500:]}")
+    if proc.returncode != 0 or not wheels:       # the project's, not the manifest's, fault
+        raise RuntimeError(f"could not build the boundswarm wheel: {proc.stderr[-500:]}")
     return wheels[-1]
 
 
@@ -250,9 +253,9 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
         # certificate paths relative to the working directory (the unit's is ETC)
         (b / "zenoh.json5").write_text(json.dumps(client_config(manifest, f"robot-{r.id}", "."),
                                                   indent=2))
-        k = index[r.id]
+        x, y, theta = map(float, sc.poses[index[r.id]])
         settings = AgentSettings(
-            robot_id=r.id, swarm=manifest.swarm, initial_pose=tuple(map(float, sc.poses[k])),
+            robot_id=r.id, swarm=manifest.swarm, initial_pose=(x, y, theta),
             control=sc.control, robot=sc.robot,
             can=CanSettings(interface="socketcan", channel=r.can_interface, bitrate=r.bitrate),
             zenoh=ZenohSettings(mode="client", connect=(), config="zenoh.json5"),
@@ -263,11 +266,32 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
         (b / "boundswarm-agent.service").write_text(UNIT.format(
             id=r.id, etc=etc, prefix=prefix, can=r.can_interface, bitrate=r.bitrate,
             rtprio=REALTIME_PRIORITY))
+        (b / "README.md").write_text(_robot_notes(manifest, r, etc, prefix))
         install = b / "install.sh"
         install.write_text(INSTALL.format(id=r.id, etc=etc, prefix=prefix))
         install.chmod(0o755)
         bundles[f"robot-{r.id}"] = b
     return bundles
+
+
+def _robot_notes(m: SwarmManifest, r: RobotEntry, etc: str, prefix: str) -> str:
+    return f"""# Agent of robot {r.id} in swarm "{m.swarm}"
+
+Installed by install.sh: the agent in {prefix}/venv, its configuration in {etc}
+(agent.toml, zenoh.json5, certs/, mavlink.key) and the systemd unit
+boundswarm-agent.service, which brings {r.can_interface} up at {r.bitrate} bit/s and runs
+
+    {prefix}/venv/bin/boundswarm agent --config {etc}/agent.toml
+
+    systemctl start boundswarm-agent      # ready once both drivers are armed
+    systemctl status boundswarm-agent
+    journalctl -u boundswarm-agent -f
+
+The agent connects to the swarm's router at tls/{m.router_address}:{m.router_port} and
+sends MAVLink to {m.mavlink} (signed with mavlink.key). On SIGTERM it commands zero
+velocity, sets the drivers IDLE and leaves the swarm. `boundswarm agent --help` and the
+project's README describe the rest.
+"""
 
 
 def _ground_notes(m: SwarmManifest) -> str:

@@ -235,7 +235,8 @@ def _start_plants(children: Children, sc: Scenario, opts: SitlOptions, swarm: st
     size = opts.robots_per_plant or len(ids)
     for k in range(0, len(ids), size):
         group = ids[k:k + size]
-        args = ["plant", "--scenario", str(sc.source), "--robots", ",".join(map(str, group)),
+        args = ["plant", "sitl", "--scenario", str(sc.source),
+                "--robots", ",".join(map(str, group)),
                 "--swarm", swarm, "--zenoh-connect", endpoint,
                 "--can-interface", opts.can_interface,
                 "--stats", str(out / "logs" / f"plant_{k // size}.json")]

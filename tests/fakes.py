@@ -5,22 +5,10 @@ from types import MappingProxyType
 
 import numpy as np
 
+from helpers import SimClock
+
 from common.payloads import Received
 from common.vocabulary import WheelFeedback
-
-
-class SimClock:
-    def __init__(self, start: float = 1000.0, wall_offset: float = 1.7e9):
-        self.now, self.offset = start, wall_offset
-
-    def monotonic(self) -> float:
-        return self.now
-
-    def wall(self) -> float:
-        return self.offset + self.now
-
-    def sleep_until(self, deadline: float) -> None:
-        self.now = max(self.now, deadline)
 
 
 class MirrorMotor:

@@ -1,12 +1,13 @@
 """The agent's read -> update -> write over in-memory ports, on simulated time."""
 import numpy as np
 import pytest
-from fakes import MirrorMotor, SharedSwarm, SimClock
 
 from agent.config import ControlParams
 from agent.loop import FixedRateLoop
 from agent.node import Agent
 from agent.settings import AgentSettings
+from fakes import MirrorMotor, SharedSwarm
+from helpers import SimClock
 from common.payloads import MissionMsg, ObstaclesMsg
 from common.vocabulary import AgentMode, Mode, StateFlags
 

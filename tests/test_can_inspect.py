@@ -3,7 +3,6 @@ watchdog alarm after the process driving the wheels is killed."""
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -11,6 +10,7 @@ from pathlib import Path
 
 import can
 import pytest
+from helpers import free_port
 
 from hil.can_cli import armed_writer, replay
 from hil.can_inspect import BusStats
@@ -82,12 +82,6 @@ def test_filters_by_node_and_message():
     assert {(s.name, s.node) for s in stats.streams.values()} == {("Heartbeat", 1)}
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
-        s.bind(("::1", 0))
-        return s.getsockname()[1]
-
-
 def test_log_decode_replay_reproduces_the_frames(tmp_path):
     frames = traffic(seconds=0.3)
     log = tmp_path / "capture.log"
@@ -103,7 +97,7 @@ def test_log_decode_replay_reproduces_the_frames(tmp_path):
     assert "Set_Input_Vel node 0: Input_Vel=3.000 rev/s" in out[0]
     assert any("Axis_State=CLOSED_LOOP_CONTROL" in line for line in out)
     # replay onto a bus and record what arrives
-    port = free_udp_port()
+    port = free_port("udp6")
     rx = open_bus("udp_multicast", "ff11::b5:3", port=port)
     tx = open_bus("udp_multicast", "ff11::b5:3", port=port)
     try:
@@ -128,7 +122,7 @@ def test_log_decode_replay_reproduces_the_frames(tmp_path):
 
 
 def test_replay_refuses_commands_while_an_armed_agent_writes(tmp_path):
-    port = free_udp_port()
+    port = free_port("udp6")
     log = tmp_path / "cmds.log"
     with can.Logger(str(log)) as logger:
         m = encode(0, Cmd.SET_INPUT_VEL, Input_Vel=1.0, Input_Torque_FF=0.0)
@@ -161,7 +155,7 @@ def test_replay_refuses_commands_while_an_armed_agent_writes(tmp_path):
 
 
 def test_killing_the_writer_shows_a_watchdog_alarm_within_a_second():
-    port = free_udp_port()
+    port = free_port("udp6")
     group = "ff11::b5:5"
     drivers = subprocess.Popen([sys.executable, "-m", "hil.cli", "plant", "--drivers-only",
                                 "--can-interface", "udp_multicast", "--can-channel", group,
@@ -206,7 +200,7 @@ while True:
 
 
 def test_stats_json_shape_from_the_cli(tmp_path):
-    port = free_udp_port()
+    port = free_port("udp6")
     drivers = subprocess.Popen([sys.executable, "-m", "hil.cli", "plant", "--drivers-only",
                                 "--can-interface", "udp_multicast", "--can-channel",
                                 "ff11::b5:6", "--can-port", str(port)], cwd=ROOT,

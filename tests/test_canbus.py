@@ -7,21 +7,17 @@ from pathlib import Path
 
 import can
 import pytest
+from helpers import free_port
 
-from transport.canbus import BusOpenError, EchoFilteredBus, has_socketcan, open_bus
+from transport.canbus import (DEFAULT_GROUP, BusOpenError, EchoFilteredBus, has_socketcan,
+                              open_bus)
 from transport.wheel_drivers import WheelDrivers
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
-        s.bind(("::1", 0))
-        return s.getsockname()[1]
-
-
 def test_udp_multicast_hears_peers_but_not_itself():
-    port = free_udp_port()
+    port = free_port("udp6")
     a = open_bus("udp_multicast", "ff11::b5:9", port=port)
     b = open_bus("udp_multicast", "ff11::b5:9", port=port)
     # a python-can tool on the same bus (e.g. can.viewer): it hears both and is heard
@@ -52,7 +48,7 @@ def test_groups_that_could_leave_the_host_are_refused():
     # refused by address check before any socket is opened: nothing is ever sent to them
     for group in ("ff15::1", "ff02::1", "239.1.1.1"):
         with pytest.raises(BusOpenError, match="ff11|IPv6 multicast"):
-            open_bus("udp_multicast", group, port=free_udp_port())
+            open_bus("udp_multicast", group, port=free_port("udp6"))
 
 
 def test_socketcan_missing_is_a_clear_error():
@@ -65,22 +61,39 @@ def test_socketcan_missing_is_a_clear_error():
 def test_auto_falls_back_to_udp_multicast_without_socketcan():
     if has_socketcan("vcan0"):
         pytest.skip("this kernel has vcan0")
-    bus = open_bus("auto", "vcan0", port=free_udp_port())
+    port = free_port("udp6")
+    bus = open_bus("auto", "vcan0", port=port)
+    peer = open_bus("udp_multicast", DEFAULT_GROUP, port=port)
     try:
-        assert "ff11" in str(bus.channel_info) or isinstance(bus, EchoFilteredBus)
+        assert isinstance(bus, EchoFilteredBus)
+        assert bus.inner._multicast.group == DEFAULT_GROUP and bus.inner._multicast.port == port
+        peer.send(can.Message(arbitration_id=0x02D, data=bytes(8), is_extended_id=False))
+        got = bus.recv(2.0)
+        assert got is not None and got.arbitration_id == 0x02D
     finally:
         bus.shutdown()
+        peer.shutdown()
 
 
-def test_virtual_bus():
-    bus = open_bus("virtual", "unit-test-channel")
-    bus.shutdown()
+def test_virtual_bus_carries_frames_between_its_users():
+    a = open_bus("virtual", "unit-test-channel")
+    b = open_bus("virtual", "unit-test-channel")
+    try:
+        assert not isinstance(a, EchoFilteredBus)
+        a.send(can.Message(arbitration_id=0x029, data=bytes(range(8)), is_extended_id=False))
+        got = b.recv(1.0)
+        assert got is not None and got.arbitration_id == 0x029 and bytes(got.data) == \
+            bytes(range(8))
+        assert a.recv(0.1) is None                  # not its own frame
+    finally:
+        a.shutdown()
+        b.shutdown()
 
 
 def test_host_and_drivers_in_two_processes_over_udp_multicast():
-    port = free_udp_port()
+    port = free_port("udp6")
     child = subprocess.Popen(
-        [sys.executable, "-m", "hil.cli", "plant", "--drivers-only",
+        [sys.executable, "-m", "hil.cli", "plant", "drivers",
          "--can-interface", "udp_multicast", "--can-channel", "ff11::b5:2",
          "--can-port", str(port)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     bus = open_bus("udp_multicast", "ff11::b5:2", port=port)
@@ -115,7 +128,7 @@ def test_host_and_drivers_in_two_processes_over_udp_multicast():
 
 
 def test_a_stray_datagram_on_the_bus_port_is_skipped_not_fatal():
-    port = free_udp_port()
+    port = free_port("udp6")
     bus = open_bus("udp_multicast", "ff11::b5:8", port=port)
     peer = open_bus("udp_multicast", "ff11::b5:8", port=port)
     try:
@@ -133,7 +146,7 @@ def test_a_stray_datagram_on_the_bus_port_is_skipped_not_fatal():
 def test_a_send_port_that_is_another_bus_port_neither_blocks_nor_steals_from_it():
     """A bus sends from an ephemeral port, drawn from the range robot buses' ports come
     from: a bus opened later on that port opens and hears all of its peers' frames."""
-    opened = [open_bus("udp_multicast", "ff11::b5:6", port=free_udp_port())]
+    opened = [open_bus("udp_multicast", "ff11::b5:6", port=free_port("udp6"))]
     try:
         x = opened[0]
         port = x._tx.getsockname()[1]

@@ -1,14 +1,19 @@
-"""The boundswarm CLI end to end, in-process (main(argv))."""
+"""The boundswarm CLI end to end, in-process (main(argv)), and its exit codes."""
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from hil.cli import main
+from hil.plant_cli import as_subcommand
 from hil.figures import FIGURE_FILES
 from hil.run_folder import read_run
 
-SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIOS = ROOT / "scenarios"
 DESIGN_KEYS = {"scenario", "robots", "duration", "min_pair_distance", "min_obstacle_clearance",
                "max_abs_v", "max_abs_u", "converged", "convergence_time",
                "final_max_tracking_error", "collisions", "stuck_robots", "mode_switches"}
@@ -70,3 +75,98 @@ def test_sitl_refuses_bad_options_before_starting_anything(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--mavlink-key" in err and "missing.key" in err
     assert not out.exists()
+
+
+# --- exit codes: 2 for bad input only, 1 and one line for anything else -----------------
+def test_a_bad_agent_config_exits_2_naming_the_field(tmp_path, capsys):
+    bad = tmp_path / "agent.toml"
+    bad.write_text('robot_id = 300\nswarm = "x"\ninitial_pose = [0.0, 0.0, 0.0]\n')
+    assert main(["agent", "--config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "robot_id" in err and "Traceback" not in err
+
+
+def test_a_missing_file_exits_2_naming_it(tmp_path, capsys):
+    missing = tmp_path / "nowhere.toml"
+    assert main(["sim", str(missing), "--out", str(tmp_path / "o")]) == 2
+    assert str(missing) in capsys.readouterr().err
+    assert main(["router", "--config", str(tmp_path / "nowhere.json5")]) == 2
+    assert "nowhere.json5" in capsys.readouterr().err
+
+
+def test_an_invalid_option_value_exits_2_naming_the_option(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["plant", "drivers", "--rate", "5"])
+    assert exc.value.code == 2 and "--rate" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["mission", "--scenario", "x.toml", "--swarm", "a/b", "--connect", "tcp/x:1"])
+    assert exc.value.code == 2 and "--swarm" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("error", [ValueError("operands could not be broadcast\ntogether"),
+                                   OSError(28, "No space left on device")])
+def test_an_internal_error_exits_1_with_one_line_and_no_traceback(tmp_path, capsys,
+                                                                  monkeypatch, error):
+    """A bug (here a ValueError or an OSError from inside the simulator) is not the user's
+    input: exit 1, one line naming the error, no traceback."""
+    from firmware_sim import batch
+
+    def broken(*args, **kwargs):
+        raise error
+    monkeypatch.setattr(batch, "simulate", broken)
+    assert main(["sim", str(SCENARIOS / "paper.toml"), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("boundswarm sim: failed: ") and type(error).__name__ in err
+
+
+def test_verbose_adds_the_traceback_of_an_internal_error(tmp_path, capsys, monkeypatch):
+    from firmware_sim import batch
+
+    def broken(*args, **kwargs):
+        raise KeyError("k")
+    monkeypatch.setattr(batch, "simulate", broken)
+    assert main(["-v", "sim", str(SCENARIOS / "paper.toml"), "--out", str(tmp_path / "o")]) == 1
+    assert "Traceback" in capsys.readouterr().err
+
+
+def test_a_bus_that_cannot_be_opened_exits_1_without_traceback():
+    """As a user runs it (a process): a CAN bus that cannot be opened is the machine's
+    failure, not bad input."""
+    proc = subprocess.run([sys.executable, "-m", "hil.cli", "plant", "drivers",
+                           "--can-interface", "socketcan", "--can-channel", "nocan9"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
+    assert "nocan9" in proc.stderr
+
+
+# --- plant: three programs -------------------------------------------------------------
+@pytest.mark.parametrize("argv, expected", [
+    (["plant", "--drivers-only", "--rate", "300"], ["plant", "drivers", "--rate", "300"]),
+    (["-v", "plant", "--can-port", "9", "--world-only"], ["-v", "plant", "world", "--can-port",
+                                                          "9"]),
+    (["plant", "sitl", "--scenario", "s"], ["plant", "sitl", "--scenario", "s"]),
+    (["sim", "plant", "--drivers-only"], ["sim", "plant", "--drivers-only"]),
+])
+def test_the_flag_forms_of_plant_are_its_subcommands(argv, expected):
+    assert as_subcommand(argv) == expected
+
+
+def test_plant_options_belong_to_their_program(capsys):
+    """Each program takes only its own options: the SITL plant and the world have no
+    --rate, the drivers no --scenario."""
+    for argv in (["plant", "sitl", "--scenario", "s", "--swarm", "x", "--zenoh-connect", "e",
+                  "--rate", "300"],
+                 ["plant", "drivers", "--scenario", "s"],
+                 ["plant", "--world-only", "--scenario", "s", "--swarm", "x", "--zenoh-connect",
+                  "e", "--rate", "300"]):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 2 and "unrecognized arguments" in capsys.readouterr().err
+
+
+def test_plant_drivers_with_zenoh_needs_robot_and_swarm(capsys):
+    assert main(["plant", "drivers", "--can-interface", "virtual", "--can-channel", "t",
+                 "--zenoh-connect", "tcp/127.0.0.1:1"]) == 2
+    assert "--robot and --swarm" in capsys.readouterr().err

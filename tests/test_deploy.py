@@ -12,17 +12,12 @@ from pathlib import Path
 import pytest
 import zenoh
 from cryptography import x509
+from helpers import free_port
 
 from hil.deploy import DeployError, deploy, load_manifest
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV_BIN = Path(sys.executable).parent
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 MANIFEST = """version = 1
@@ -82,6 +77,18 @@ def test_bundle_contents_and_private_keys(bundles):
     unit = (out / "robot-2" / "boundswarm-agent.service").read_text()
     assert "Type=notify" in unit and "WatchdogSec=" in unit and "Restart=on-failure" in unit
     assert "ip link set can1 up type can bitrate 1000000" in unit
+
+
+def test_the_unit_documents_itself_with_the_installed_readme(bundles):
+    """Documentation= names the README that install.sh installs, not a host elsewhere."""
+    b = bundles["out"] / "robot-2"
+    unit = (b / "boundswarm-agent.service").read_text()
+    doc = next(line for line in unit.splitlines() if line.startswith("Documentation="))
+    prefix = Path(doc.removeprefix("Documentation=file://")).parent
+    assert doc == f"Documentation=file://{prefix}/README.md" and "http" not in unit
+    assert f'install -m 0644 "$HERE"/README.md {prefix}/' in (b / "install.sh").read_text()
+    notes = (b / "README.md").read_text()
+    assert "robot 2" in notes and "can1" in notes and "journalctl -u boundswarm-agent" in notes
 
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None,

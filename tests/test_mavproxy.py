@@ -18,7 +18,6 @@ import pty
 import re
 import select
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -37,7 +36,7 @@ from common.payloads import PayloadError, StateMsg, TruthMsg  # noqa: E402
 from common.vocabulary import StateFlags  # noqa: E402
 from hil.processes import wait_until  # noqa: E402
 from transport.zenoh_link import Keys, open_session, session_config  # noqa: E402
-from procs import alive  # noqa: E402
+from helpers import alive, free_port  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = ROOT / "scenarios" / "sitl_small.toml"      # robots 1, 2, 3
@@ -46,12 +45,6 @@ TARGET = 2                                               # the robot MAVProxy co
 STARTUP = 90.0         # s for the swarm to come up and MAVProxy to see it (shared 2-core box)
 ACK = 10.0             # s for a command's answer
 MODULES = "signing,param,arm,mode"                      # MAVProxy modules loaded
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def children_of(pid: int) -> list[int]:
@@ -284,7 +277,7 @@ def rig(tmp_path):
     made = {}
 
     def start(key_file: Path | None = None):
-        port = free_udp_port()
+        port = free_port("udp")
         made["swarm"] = swarm = Swarm(tmp_path, port, key_file)
         manifest = swarm.wait_manifest(STARTUP)
         made["watch"] = watch = SwarmWatch(manifest)

@@ -19,6 +19,7 @@ import os
 import re
 import shutil
 import signal
+import statistics
 import subprocess
 import sys
 import time
@@ -27,6 +28,7 @@ from pathlib import Path
 import pytest
 
 from hil.deploy import deploy, load_manifest
+from hil.recorder import read_messages
 from hil.scenario import load_scenario
 from hil.sitl_report import analyse_recording, missed_in
 
@@ -37,6 +39,7 @@ PAPER = ROOT / "scenarios" / "paper.toml"
 FAULT_RUN = 20.0                    # s of mission in the fault tests (recovery time)
 RELAY_PORT = 7448                   # the delaying relay, on the ground station's address
 MAX_MISSED_PERIODS = 3              # per agent while the mission runs (VM stalls)
+LOSS_FELT_MS = 5.0                  # mean uplink delay of a robot whose link loses segments
 PREFIX = f"bs{os.getpid() % 10000}"
 
 
@@ -240,7 +243,7 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
                                  "--control", str(control), "-v"], ROOT, logs,
                                 program=(sys.executable,))
             assert _wait_for(logs / "relay.log", "relaying", 30), (logs / "relay.log").read_text()
-        hosts.start(hosts.ground, "world", ["plant", "--world-only", "--scenario",
+        hosts.start(hosts.ground, "world", ["plant", "world", "--scenario",
                                             "scenario.toml", "--swarm", "field",
                                             "--zenoh-config", "ground-client.json5",
                                             "--stats", str(logs / "world.json")],
@@ -251,7 +254,7 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
         for r in ids:
             b = out / f"robot-{r}"
             hosts.start(hosts.robot_ns[r], f"drivers_{r}",
-                        ["plant", "--drivers-only", "--can-interface", "udp_multicast",
+                        ["plant", "drivers", "--can-interface", "udp_multicast",
                          "--can-channel", "ff11::b5:1", "--can-port", "43300", "--robot",
                          str(r), "--swarm", "field", "--zenoh-config", drivers_conf[r]], b, logs)
             hosts.start(hosts.robot_ns[r], f"agent_{r}",
@@ -304,7 +307,24 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
                         for r in ids})
     result["missed_in_mission"] = {r: missed_in(st["loop"], epoch, epoch + sc.duration)
                                    for r, st in result["agents"].items()}
+    result["uplink_ms"] = uplink_delays(tmp_path / "run.mcap", epoch)
     return result
+
+
+def uplink_delays(recording: Path, epoch: float) -> dict[int, list[tuple[float, float]]]:
+    """Per robot, (t of each state after the mission's t = 0 [s], how late the ground's
+    router received it [ms]): the router stamps what it receives, so log time minus the
+    agent's own stamp is the robot's uplink delay."""
+    delays: dict[int, list[tuple[float, float]]] = {}
+    for _topic, kind, log_t, msg in read_messages(recording):
+        if kind == "state":
+            delays.setdefault(msg["robot_id"], []).append(
+                (msg["stamp"] - epoch, (log_t - msg["stamp"]) * 1e3))
+    return delays
+
+
+def window(delays: list[tuple[float, float]], t_from: float, t_to: float) -> list[float]:
+    return [d for t, d in delays if t_from <= t <= t_to]
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -354,8 +374,16 @@ def test_link_fault_on_one_robot(tmp_path):
           {r: st["agent"]["neighbour_age_ms"] for r, st in run["agents"].items()})
     assert m["collisions"] == 0 and m["min_pair_distance"] > run["a"], brief(m)
     assert m["converged"], brief(m)
-    ages = run["agents"][1]["agent"]["neighbour_age_ms"]
-    assert ages["p99"] > run["agents"][1]["loop"]["period_s"] * 1e3   # the fault was felt
+    # the fault was felt: robot 2's states reached the ground late while its link lost
+    # segments (TCP retransmissions), as they never do on a sound link (mean 2 ms; a stall
+    # of the VM adds about 1 ms to a 4 s window), and on time again once it healed; the
+    # sound links of robots 1 and 3 in the same window are the fault-free control
+    on, off = run["fault_on"]
+    mean = {r: statistics.fmean(window(run["uplink_ms"][r], on + 0.1, off - 0.1))
+            for r in (1, 2, 3)}
+    healed = statistics.fmean(window(run["uplink_ms"][2], off + 2.0, FAULT_RUN))
+    assert mean[2] > max(LOSS_FELT_MS, 3 * healed), (mean, healed)
+    assert mean[1] < LOSS_FELT_MS and mean[3] < LOSS_FELT_MS, mean
 
 
 def test_link_delay_on_one_robot(tmp_path):
@@ -372,6 +400,9 @@ def test_link_delay_on_one_robot(tmp_path):
     assert m["converged"], brief(m)
     for stats in agents.values():
         assert stats["failsafe"] is None
-    # the fault was felt: robot 2's states reached its neighbours late, theirs reached it late
+    # the fault was felt: robot 2's states reached the ground and its neighbours late, theirs
+    # reached it late (fault-free, the neighbour-state age p99 is 16-21 ms)
+    on, off = run["fault_on"]
+    assert statistics.median(window(run["uplink_ms"][2], on + 0.1, off - 0.1)) > 0.9 * delay.ms
     for r in (1, 2, 3):
         assert ages[r]["p99"] > 0.75 * delay.ms, ages

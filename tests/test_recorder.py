@@ -1,11 +1,11 @@
 """The MCAP recorder: JSON exactly as before, every message of a swarm recorded, none lost."""
 import dataclasses
 import json
-import socket
 import time
 
 import numpy as np
 import pytest
+from helpers import free_port
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
@@ -81,9 +81,7 @@ def test_a_bad_payload_raises_as_its_decoder_does():
 @pytest.fixture
 def sessions():
     """A router (where the SITL launcher records) and a client on loopback."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = open_session(session_config("router", listen=[endpoint]), "router")
     client = open_session(session_config("client", connect=[endpoint]), "client")
     try:
@@ -172,9 +170,7 @@ def test_close_writes_what_arrived_and_not_yet_written(sessions, tmp_path):
 
 
 def test_without_zenoh_timestamps_log_time_is_the_recorders_clock(tmp_path):
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = open_session(session_config("router", listen=[endpoint],
                                          extra={"timestamping/enabled": False}), "router")
     client = open_session(session_config("client", connect=[endpoint]), "client")

@@ -6,7 +6,6 @@ process it started (by PID, from the run manifest).
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -20,7 +19,7 @@ from common.payloads import MissionMsg
 from firmware_sim.batch import SimOptions, simulate
 from hil.run_folder import read_run
 from hil.scenario import load_scenario
-from procs import alive
+from helpers import alive, free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"
@@ -184,10 +183,7 @@ def test_one_ground_station_port_reaches_every_agent(launch):
     """A pymavlink ground station on one UDP port sees every agent and commands robot 2
     alone (the launcher's router routes by target system)."""
     from pymavlink import mavutil
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.bind(("127.0.0.1", 0))
-    port = sock.getsockname()[1]
-    sock.close()
+    port = free_port("udp")
     gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
     try:
         run = launch("sitl_small.toml", "--gcs-port", str(port))

@@ -1,20 +1,14 @@
 """Zenoh link over a router on loopback (scouting off): keys, latest values, presence."""
-import socket
 import threading
 import time
 
 import pytest
+from helpers import free_port
 
 from common.payloads import StateMsg
 from common.vocabulary import StateFlags
 from hil.processes import wait_until
 from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture

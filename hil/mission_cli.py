@@ -1,0 +1,52 @@
+"""``boundswarm mission``: publish a scenario's mission (formation, shared epoch) to a swarm."""
+from __future__ import annotations
+
+import argparse
+import time
+
+from rich.console import Console
+
+from hil.cli_options import Subparsers, add_zenoh_client_options, swarm_name, zenoh_client
+from hil.exit_codes import EXIT_OK
+
+REPEATS, REPEAT_PERIOD = 3, 0.2          # late subscribers get the mission too
+
+
+def add_parser(sub: Subparsers) -> None:
+    p = sub.add_parser("mission", help="publish a scenario's mission to a swarm")
+    p.add_argument("--scenario", required=True, help="scenario file (TOML)")
+    p.add_argument("--swarm", required=True, type=swarm_name)
+    add_zenoh_client_options(p, required=True)
+    p.add_argument("--start-in", type=float, default=5.0, help="s until t = 0")
+    p.add_argument("--wait", type=float, default=30.0,
+                   help="s to wait for every robot's liveliness token")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace, console: Console) -> int:
+    """Wait until every robot of the scenario is alive, then publish its mission."""
+    from hil.processes import wait_until
+    from hil.scenario import load_scenario
+    from common.payloads import MissionMsg
+    from transport.zenoh_link import Keys, Presence, open_session
+    sc = load_scenario(args.scenario)
+    session = open_session(zenoh_client(args.config, args.connect), "the mission publisher")
+    try:
+        keys = Keys(args.swarm)
+        presence = Presence(session, keys)
+        ids = {int(i) for i in sc.ids}
+        if not wait_until(lambda: presence.alive() >= ids, args.wait):
+            missing = sorted(ids - presence.alive())
+            raise RuntimeError(f"robots {missing} are not alive after {args.wait:g} s")
+        epoch = time.time() + args.start_in
+        msg = MissionMsg(1, time.time(), epoch, sc.formation.center0, sc.formation.velocity,
+                         sc.formation.omega, sc.ids, sc.formation.offsets)
+        for _ in range(REPEATS):
+            session.put(keys.mission, msg.encode())
+            time.sleep(REPEAT_PERIOD)
+        console.print(f"mission of {sc.name} published to {args.swarm}: t = 0 in "
+                      f"{args.start_in:g} s (epoch {epoch:.3f})")
+        presence.close()
+    finally:
+        session.close()
+    return EXIT_OK

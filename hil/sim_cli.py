@@ -1,0 +1,62 @@
+"""``boundswarm sim``: batch simulation of a scenario into a run folder."""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from rich.console import Console
+
+from firmware_sim.plant import PlantKind
+from hil.cli_options import Subparsers
+from hil.console import LazyProgress, summary_table
+from hil.exit_codes import EXIT_OK, EXIT_UNSAFE
+
+
+def add_parser(sub: Subparsers) -> None:
+    p = sub.add_parser("sim", help="batch simulation of a scenario (in-process, vectorised)")
+    p.add_argument("scenario", help="scenario file (TOML)")
+    p.add_argument("--out", required=True, help="run folder to write")
+    p.add_argument("--duration", type=float, help="override the scenario's duration [s]")
+    p.add_argument("--plant", choices=[k.value for k in PlantKind],
+                   help="ideal unicycle, or wheels with the drivers' speed limit and ramp")
+    p.add_argument("--substeps", type=int, help="physics steps per control period")
+    p.add_argument("--record-every", type=int, default=1, metavar="K",
+                   help="record one control period in K (0: metrics only, no figures)")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse a configuration that breaks the braking margin")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace, console: Console) -> int:
+    """Simulate, write the run folder (metrics, data, figures), print the summary."""
+    from agent.config import check_braking_margin
+    from firmware_sim.batch import SimOptions, simulate
+    from hil import run_folder
+    from hil.figures import draw_figures
+    from hil.scenario import load_scenario
+    sc = load_scenario(args.scenario)
+    options = SimOptions(duration=args.duration or sc.duration,
+                         sensing_range=sc.sensing_range,
+                         substeps=args.substeps or sc.substeps,
+                         plant=PlantKind(args.plant) if args.plant else sc.plant,
+                         record_every=args.record_every)
+    if options.plant is PlantKind.WHEELS:
+        check_braking_margin(sc.control, sc.robot, strict=args.strict)
+    started = time.perf_counter()
+    with LazyProgress(console, f"sim {sc.name}") as progress:
+        result = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
+                          options, progress=progress)
+    elapsed = time.perf_counter() - started
+    metrics = result.metrics.summary(sc.name, options.duration)
+    metrics["plant"] = options.plant.value
+    metrics["compute_seconds"] = round(elapsed, 3)
+    out = Path(args.out)
+    data = run_folder.RunData.from_result(result)
+    run_folder.write_run(out, metrics, data, sc.source.read_text() if sc.source else None)
+    if options.record_every:
+        draw_figures(data, sc.obstacles, sc.control.a, sc.control.b, out / run_folder.FIGURES)
+    console.print(summary_table(metrics, f"{sc.name}: {len(sc.ids)} robots, "
+                                         f"{options.duration:g} s simulated in {elapsed:.2f} s"))
+    console.print(f"metrics: {out / run_folder.METRICS}\nfigures: {out / run_folder.FIGURES}/")
+    return EXIT_OK if metrics["collisions"] == 0 else EXIT_UNSAFE

@@ -1,0 +1,149 @@
+"""``boundswarm sitl``: the SITL swarm on a scenario, recorded into a run folder."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rich.console import Console
+
+from hil.cli_options import Subparsers, add_can_options, priority
+from hil.console import summary_table
+from hil.exit_codes import EXIT_LOST, EXIT_NOT_RUN, EXIT_OK, EXIT_UNSAFE, BadInput
+
+if TYPE_CHECKING:
+    from hil.sitl import SitlRun
+
+
+def add_parser(sub: Subparsers) -> None:
+    p = sub.add_parser("sitl", help="SITL swarm: router, plant, one agent process per robot")
+    p.add_argument("scenario", help="scenario file (TOML)")
+    p.add_argument("--out", required=True, help="run folder to write")
+    p.add_argument("--duration", type=float, help="override the scenario's duration [s]")
+    add_can_options(p)
+    p.add_argument("--can-base-port", type=int, default=43200,
+                   help="udp_multicast: robot ID's bus on port BASE + ID")
+    p.add_argument("--robots-per-plant", type=int, default=0,
+                   help="robots hosted by one plant process (0: all in one)")
+    p.add_argument("--no-live", action="store_true", help="no live status table")
+    p.add_argument("--gcs-port", type=int, default=14550,
+                   help="UDP port of the ground station on 127.0.0.1 (0: no MAVLink)")
+    p.add_argument("--mavlink-key", metavar="FILE",
+                   help="MAVLink 2 signing key of every agent (32 bytes, or a passphrase "
+                        "as MAVProxy's 'signing key' hashes it); unsigned commands refused")
+    p.add_argument("--realtime-priority", type=priority, default=10, metavar="P",
+                   help="agents' control loops run SCHED_FIFO at priority P (1..99; needs "
+                        "root or RLIMIT_RTPRIO, else a warning; 0: normal scheduling)")
+    p.add_argument("--near-radius", type=float, default=0.0, metavar="M",
+                   help="agents take full-rate states only from robots within M metres "
+                        "and 5 Hz beacons from the rest (0: every robot at full rate)")
+    p.set_defaults(func=run)
+
+
+def _percentiles(values: list[float | None]) -> dict[str, float | None]:
+    import numpy as np
+    a = np.asarray([v for v in values if v is not None], dtype=float)
+    if not a.size:
+        return {"p50": None, "p99": None, "max": None}
+    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)),
+            "max": float(a.max())}
+
+
+def _mavlink_key(path: str | None) -> str | None:
+    """The absolute path of a readable signing key, BadInput if it is not one."""
+    if not path:
+        return None
+    from transport.mavlink_signing import load_signing_key
+    try:
+        load_signing_key(Path(path))
+    except (OSError, ValueError) as exc:
+        raise BadInput(f"--mavlink-key: {exc}") from None
+    return str(Path(path).resolve())
+
+
+def run(args: argparse.Namespace, console: Console) -> int:
+    """Check the options, run the swarm, turn its recording into metrics and figures."""
+    from agent.settings import near_radius_problem
+    from hil import run_folder
+    from hil.figures import draw_figures
+    from hil.scenario import load_scenario
+    from hil.sitl import SitlError, SitlOptions, run_sitl
+    from hil.sitl_report import analyse_recording
+    sc = load_scenario(args.scenario)
+    if args.duration:
+        sc = dataclasses.replace(sc, duration=args.duration)
+    out = Path(args.out)
+    opts = SitlOptions(can_interface=args.can_interface, can_channel=args.can_channel,
+                       can_base_port=args.can_base_port,
+                       robots_per_plant=args.robots_per_plant, live=not args.no_live,
+                       gcs_port=args.gcs_port, near_radius=args.near_radius,
+                       mavlink_key=_mavlink_key(args.mavlink_key),
+                       realtime_priority=args.realtime_priority)
+    if problem := near_radius_problem(opts.near_radius, sc.sensing_range):
+        raise BadInput(f"--near-radius {problem}")
+    started = time.perf_counter()
+    try:
+        swarm = run_sitl(sc, out, opts, console)
+    except SitlError as exc:
+        print(f"boundswarm sitl: {exc}", file=sys.stderr)
+        return EXIT_NOT_RUN
+    data, result, extra = analyse_recording(out / "run.mcap", sc)
+    metrics = result.summary(sc.name, sc.duration)
+    metrics["sitl"] = _sitl_metrics(swarm, extra["epoch"], sc.duration,
+                                    time.perf_counter() - started)
+    run_folder.write_run(out, metrics, data, sc.source.read_text() if sc.source else None)
+    draw_figures(data, sc.obstacles, sc.control.a, sc.control.b, out / run_folder.FIGURES)
+    console.print(summary_table(metrics, f"SITL {sc.name}: {len(sc.ids)} agents"))
+    s = metrics["sitl"]
+    console.print(f"deadline misses: {s['deadline_misses_in_mission']} in the mission, "
+                  f"{s['deadline_misses']} in all (start-up included), watchdog trips: "
+                  f"{sum(s['watchdog_trips'].values())}, lost: {s['lost_processes'] or 'none'}")
+    if s["deadline_misses_in_mission"]:
+        console.print(f"[yellow]warning: {s['deadline_misses_in_mission']} control periods "
+                      f"missed in the mission: this machine could not run {len(sc.ids)} agents "
+                      f"in real time; late periods and stale neighbour data eat the braking "
+                      f"margin, so the safety of this run is not representative (fewer "
+                      f"robots, or more cores)[/yellow]")
+    console.print(f"metrics: {out / run_folder.METRICS}\nfigures: {out / run_folder.FIGURES}/"
+                  f"\nrecording: {out / 'run.mcap'} (Foxglove, mcap tools)")
+    if metrics["collisions"]:
+        return EXIT_UNSAFE
+    return EXIT_LOST if swarm.lost else EXIT_OK
+
+
+def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> dict[str, Any]:
+    """The ``sitl`` block of metrics.json: loops, links, drivers and CPU of every process."""
+    from hil.sitl_report import missed_in
+    loops = {rid: st["loop"] for rid, st in run.agent_stats.items()}
+    mission_misses = {rid: missed_in(lp, epoch, epoch + duration) for rid, lp in loops.items()}
+    return {
+        "wall_seconds": round(wall, 2),
+        "agents_reporting": len(run.agent_stats),
+        "lost_processes": run.lost,
+        "deadline_misses": sum(lp["overruns"] for lp in loops.values()),
+        "deadline_misses_in_mission": sum(mission_misses.values()),
+        "missed_in_mission_per_agent": mission_misses,
+        "period_jitter_ms": _percentiles([lp["jitter"]["p99_ms"] for lp in loops.values()]),
+        "jitter_p50_ms_per_agent": {r: lp["jitter"]["p50_ms"] for r, lp in loops.items()},
+        "jitter_p99_ms_per_agent": {r: lp["jitter"]["p99_ms"] for r, lp in loops.items()},
+        "jitter_max_ms_per_agent": {r: lp["jitter"]["max_ms"] for r, lp in loops.items()},
+        "compute_p99_ms_per_agent": {r: lp["compute"]["p99_ms"] for r, lp in loops.items()},
+        "neighbour_age_ms": {r: st["agent"]["neighbour_age_ms"]
+                             for r, st in run.agent_stats.items()},
+        "failsafes": {r: st["failsafe"] for r, st in run.agent_stats.items() if st["failsafe"]},
+        "can": {r: st["can"] for r, st in run.agent_stats.items()},
+        "zenoh_dropped": {r: {**st["zenoh"]["states"]["dropped"],
+                              **{f"beacon_{k}": v for k, v in
+                                 st["zenoh"].get("beacons", {}).get("dropped", {}).items()}}
+                          for r, st in run.agent_stats.items()},
+        "watchdog_trips": {k: v for p in run.plant_stats
+                           for k, v in p.get("watchdog_trips", {}).items()},
+        "plant_overruns": sum(p["overruns"] for p in run.plant_stats),
+        "cpu_share": {**{f"agent_{r}": round(st["cpu_seconds"] / st["wall_seconds"], 3)
+                         for r, st in run.agent_stats.items()},
+                      **{f"plant_{k}": round(p["cpu_seconds"] / p["wall_seconds"], 3)
+                         for k, p in enumerate(run.plant_stats)}},
+    }

@@ -1,0 +1,48 @@
+"""Helpers shared by the tests: free loopback ports, simulated time, process checks."""
+from __future__ import annotations
+
+import os
+import socket
+
+KINDS = {"tcp": (socket.AF_INET, socket.SOCK_STREAM, "127.0.0.1"),
+         "udp": (socket.AF_INET, socket.SOCK_DGRAM, "127.0.0.1"),
+         "udp6": (socket.AF_INET6, socket.SOCK_DGRAM, "::1")}
+
+
+def free_port(kind: str = "tcp") -> int:
+    """A port that is free on loopback now (``tcp``, ``udp`` on 127.0.0.1, ``udp6`` on ::1)."""
+    family, type_, host = KINDS[kind]
+    with socket.socket(family, type_) as s:
+        s.bind((host, 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+class SimClock:
+    """Monotonic time that advances only when slept or set (``now``); wall time is a fixed
+    offset from it."""
+
+    def __init__(self, start: float = 1000.0, wall_offset: float = 1.7e9):
+        self.now, self.offset = start, wall_offset
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def wall(self) -> float:
+        return self.offset + self.now
+
+    def sleep_until(self, deadline: float) -> None:
+        self.now = max(self.now, deadline)
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie child of this process does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:
+        done, _ = os.waitpid(pid, os.WNOHANG)
+        return done == 0
+    except ChildProcessError:              # not our child: it exists, so it runs
+        return True
