@@ -51,7 +51,8 @@ class ControlParams:
         bound = self.period_bound
         if self.period > bound:
             raise ConfigError(
-                f"ControlParams.period: period {self.period:g} s breaks the bound T <= (b - a)/(2 K D_max) "
+                f"ControlParams.period: period {self.period:g} s breaks the bound "
+                f"T <= (b - a)/(2 K D_max) "
                 f"= ({self.b:g} - {self.a:g})/(2*{self.K:g}*{self.D_max:g}) = {bound:.4f} s; "
                 f"shorten the period or lower K*D_max")
 

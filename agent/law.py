@@ -29,8 +29,15 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Sequence
 
-from agent.avoidance import (EPS, HALF_PI, clearance, corner_takeover, remove_toward,
-                             segment_distance, tangent_side)
+from agent.avoidance import (
+    EPS,
+    HALF_PI,
+    clearance,
+    corner_takeover,
+    remove_toward,
+    segment_distance,
+    tangent_side,
+)
 from agent.config import ControlParams
 from agent.kinematics import wrap_angle
 from common.vocabulary import Mode

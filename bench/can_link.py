@@ -4,7 +4,8 @@
 
 Measured over python-can's udp_multicast (drivers in a child process, this machine) and
 over a real vcan0 inside User-Mode Linux (socketcan): the round trip of a remote request
-for bus voltage and current (request -> answer, served by the drivers' 1 kHz loop) p50/p99, how many such round trips per second
+for bus voltage and current (request -> answer, served by the drivers' 1 kHz loop) p50/p99,
+how many such round trips per second
 one host sustains, and the command-to-feedback latency (a new wheel velocity is sent; time
 until an encoder estimate reports it, so it includes the 10 ms estimate period). Also the
 bus load of one robot at 50 Hz on a 500 kbit/s bus from exact frame bit lengths.
@@ -68,7 +69,8 @@ def measure(interface: str, channel: str, port: int | None, seconds: float) -> d
                 time.sleep(0.0002)
             time.sleep(0.02)
         a, b = np.array(rtt) * 1e3, np.array(lat) * 1e3
-        return {"rtt_p50_ms": float(np.percentile(a, 50)), "rtt_p99_ms": float(np.percentile(a, 99)),
+        return {"rtt_p50_ms": float(np.percentile(a, 50)),
+                "rtt_p99_ms": float(np.percentile(a, 99)),
                 "round_trips_per_s": len(rtt) / seconds,
                 "cmd_to_feedback_p50_ms": float(np.percentile(b, 50)),
                 "cmd_to_feedback_p99_ms": float(np.percentile(b, 99))}

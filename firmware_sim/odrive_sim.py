@@ -35,9 +35,19 @@ from functools import lru_cache
 import can
 
 from common import drivers
-from transport.odrive_frames import (ENCODER_ESTIMATES, AxisError, AxisState, Cmd, ControlMode,
-                                     Frame, FrameError, InputMode, arbitration_id, decode,
-                                     encode)
+from transport.odrive_frames import (
+    ENCODER_ESTIMATES,
+    AxisError,
+    AxisState,
+    Cmd,
+    ControlMode,
+    Frame,
+    FrameError,
+    InputMode,
+    arbitration_id,
+    decode,
+    encode,
+)
 
 log = logging.getLogger(__name__)
 

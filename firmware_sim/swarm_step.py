@@ -126,7 +126,8 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
     [rad/s] of the formation; obs (K, 3) = obstacle centre x, y and radius [m].
     Out: out_cmd (N, 3) = v [m/s], u [rad/s], mode; out_ref (N, 4) = p_d, p_d_dot; the new
     memory; out_near (N, 2) [m]: the distance to the nearest neighbour and the smallest
-    clearance to an obstacle in range (inf: none); the watch lists: watch_j (N, watch_cap) the robots j > i whose distance is within
+    clearance to an obstacle in range (inf: none); the watch lists: watch_j (N, watch_cap)
+    the robots j > i whose distance is within
     max(nearest of i, a) + 4 reach (``reach`` [m]: the farthest a robot moves in a period),
     watch_k (N, watch_cap) the obstacles whose clearance is within the robot's smallest + 2
     reach; -1 ends a list. Returns the capacities needed: (neighbours or obstacles sensed

@@ -17,8 +17,15 @@ from dataclasses import dataclass, field
 import can
 
 from transport.busload import frame_bits
-from transport.odrive_frames import (AxisState, Cmd, FrameError, cycle_time, decode,
-                                     error_names, message_name)
+from transport.odrive_frames import (
+    AxisState,
+    Cmd,
+    FrameError,
+    cycle_time,
+    decode,
+    error_names,
+    message_name,
+)
 
 WINDOW = 2.0           # s, for rates and load
 STALE_AFTER = 3.0      # heartbeat periods without one: the node is stale

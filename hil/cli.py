@@ -13,8 +13,18 @@ import traceback
 
 from rich.console import Console
 
-from hil import (agent_cli, can_cli, deploy_cli, mission_cli, plant_cli, record_cli,
-                 report_cli, router_cli, sim_cli, sitl_cli)
+from hil import (
+    agent_cli,
+    can_cli,
+    deploy_cli,
+    mission_cli,
+    plant_cli,
+    record_cli,
+    report_cli,
+    router_cli,
+    sim_cli,
+    sitl_cli,
+)
 from hil.exit_codes import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, BadInput
 
 SUBCOMMANDS = (sim_cli, sitl_cli, agent_cli, plant_cli, can_cli, deploy_cli, router_cli,

@@ -25,9 +25,9 @@ def add_parser(sub: Subparsers) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Wait until every robot of the scenario is alive, then publish its mission."""
+    from common.payloads import MissionMsg
     from hil.processes import wait_until
     from hil.scenario import load_scenario
-    from common.payloads import MissionMsg
     from transport.zenoh_link import Keys, Presence, open_session
     sc = load_scenario(args.scenario)
     session = open_session(zenoh_client(args.config, args.connect), "the mission publisher")

@@ -20,8 +20,14 @@ from typing import Any
 
 from rich.console import Console
 
-from hil.cli_options import (Subparsers, add_can_options, add_zenoh_client_options, priority,
-                             swarm_name, zenoh_client)
+from hil.cli_options import (
+    Subparsers,
+    add_can_options,
+    add_zenoh_client_options,
+    priority,
+    swarm_name,
+    zenoh_client,
+)
 from hil.exit_codes import EXIT_OK, BadInput
 
 FLAG_FORMS = {"--drivers-only": "drivers", "--world-only": "world"}

@@ -172,6 +172,6 @@ class Recorder:
 def read_messages(path: Path) -> Iterator[tuple[str, str, float, dict]]:
     """(topic, kind, log time [s], message dict) of every message, in log-time order."""
     with open(path, "rb") as f:
-        for _schema_, channel, message in make_reader(f).iter_messages(log_time_order=True):
+        for _, channel, message in make_reader(f).iter_messages(log_time_order=True):
             yield (channel.topic, _kind(channel.topic), message.log_time / 1e9,
                    json.loads(message.data))

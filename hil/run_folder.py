@@ -55,7 +55,8 @@ class RunData:
         m = res.metrics
         return cls(ids=res.ids, t=res.t, pose=res.pose, v=res.v, u=res.u, mode=res.mode,
                    ref=res.ref, dist_t=np.asarray(m.geometry_t),
-                   d_min=finite_or_nan(m.geometry_dmin), clearance_min=finite_or_nan(m.geometry_clear))
+                   d_min=finite_or_nan(m.geometry_dmin),
+                   clearance_min=finite_or_nan(m.geometry_clear))
 
 
 def finite_or_nan(values: list) -> np.ndarray:

@@ -107,7 +107,8 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
     else:
         can = CanSettings(interface=opts.can_interface,
                           channel=(opts.can_channel or "vcan{i}").format(i=index, id=rid))
-    return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=tuple(map(float, sc.poses[index])),
+    return AgentSettings(robot_id=rid, swarm=swarm,
+                         initial_pose=tuple(map(float, sc.poses[index])),
                          control=sc.control, robot=sc.robot, can=can,
                          zenoh=ZenohSettings(mode="client", connect=(endpoint,),
                                              near_radius=opts.near_radius),
@@ -204,7 +205,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             _watch(sc, run, children, router, keys, mission, truth, states, presence,
                    opts, console)
             # clean stop: agents first (zero velocity, IDLE), then the plants
-            for name, child in agents.items():
+            for child in agents.values():
                 if child.proc.poll() is None:
                     children.terminate(child)
             children.terminate_all()

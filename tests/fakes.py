@@ -4,7 +4,6 @@ from __future__ import annotations
 from types import MappingProxyType
 
 import numpy as np
-
 from helpers import SimClock
 
 from common.payloads import Received

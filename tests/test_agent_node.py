@@ -1,13 +1,13 @@
 """The agent's read -> update -> write over in-memory ports, on simulated time."""
 import numpy as np
 import pytest
+from fakes import MirrorMotor, SharedSwarm
+from helpers import SimClock
 
 from agent.config import ControlParams
 from agent.loop import FixedRateLoop
 from agent.node import Agent
 from agent.settings import AgentSettings
-from fakes import MirrorMotor, SharedSwarm
-from helpers import SimClock
 from common.payloads import MissionMsg, ObstaclesMsg
 from common.vocabulary import AgentMode, Mode, StateFlags
 
@@ -54,7 +54,8 @@ def test_agents_swap_through_each_other_without_collision():
         for a in agents:
             a.tick()
         clock.now += 0.02
-        dmin = min(dmin, np.hypot(*(np.subtract(agents[0].odometry.pose[:2], agents[1].odometry.pose[:2]))))
+        gap = np.subtract(agents[0].odometry.pose[:2], agents[1].odometry.pose[:2])
+        dmin = min(dmin, np.hypot(*gap))
     assert dmin > 1.0
     assert agents[0].odometry.pose[0] > 5.0 and agents[1].odometry.pose[0] < -5.0
     modes = {m.mode for m in agents[0].swarm.published}
@@ -175,11 +176,16 @@ def test_every_period_reads_the_same_ports_whatever_the_mode():
     clock, net, (a, b) = make_swarm([(0.0, 0.0, 0.0), (4.0, 0.0, 0.0)],
                                     [(0.0, 0.0), (0.0, 4.0)], epoch_in=1.0)
     reads = []
-    for name in ("neighbours", "obstacles", "mission"):
-        def counted(f=getattr(a.swarm, name), name=name):
+    def counting(name):
+        f = getattr(a.swarm, name)
+
+        def counted():
             reads.append(name)
             return f()
-        setattr(a.swarm, name, counted)
+        return counted
+
+    for name in ("neighbours", "obstacles", "mission"):
+        setattr(a.swarm, name, counting(name))
     a.tick()                                   # disarmed
     a.arm()
     a.set_mode(AgentMode.FORMATION)

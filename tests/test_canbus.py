@@ -9,8 +9,7 @@ import can
 import pytest
 from helpers import free_port
 
-from transport.canbus import (DEFAULT_GROUP, BusOpenError, EchoFilteredBus, has_socketcan,
-                              open_bus)
+from transport.canbus import DEFAULT_GROUP, BusOpenError, EchoFilteredBus, has_socketcan, open_bus
 from transport.wheel_drivers import WheelDrivers
 
 ROOT = Path(__file__).resolve().parent.parent

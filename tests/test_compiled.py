@@ -17,8 +17,8 @@ from hil.scenario import load_scenario
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
 
-def both(ids, poses, form, obstacles, robot=RobotParams(), **options):
-    return [simulate(ids, poses, form, obstacles, ControlParams(), robot,
+def both(ids, poses, form, obstacles, robot=None, **options):
+    return [simulate(ids, poses, form, obstacles, ControlParams(), robot or RobotParams(),
                      SimOptions(compiled=flag, **options)) for flag in (False, True)]
 
 

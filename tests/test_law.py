@@ -2,14 +2,14 @@
 interpreted (as agents run it) and compiled (as the batch simulator runs it)."""
 import math
 
+import lawcase
 import numpy as np
 import pytest
+from lawcase import single, step
 
 from agent.config import ControlParams
 from agent.law import LawMemory
 from common.vocabulary import Mode
-import lawcase
-from lawcase import single, step
 
 P = ControlParams()
 

@@ -31,12 +31,13 @@ pytest.importorskip("MAVProxy", reason="needs the MAVProxy ground station: pip i
                                        "--no-deps 'MAVProxy>=1.8.75' (its other dependencies "
                                        "are 3D-map/camera ones, not needed here)")
 
+from helpers import alive, free_port  # noqa: E402
+
 from agent.config import CONTROL_PARAMS as PARAMS  # noqa: E402
 from common.payloads import PayloadError, StateMsg, TruthMsg  # noqa: E402
 from common.vocabulary import StateFlags  # noqa: E402
 from hil.processes import wait_until  # noqa: E402
 from transport.zenoh_link import Keys, open_session, session_config  # noqa: E402
-from helpers import alive, free_port  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = ROOT / "scenarios" / "sitl_small.toml"      # robots 1, 2, 3

@@ -8,8 +8,17 @@ from pathlib import Path
 import can
 import pytest
 
-from transport.odrive_frames import (AxisError, AxisState, Cmd, FrameError, cycle_time, decode,
-                                     encode, error_names, request)
+from transport.odrive_frames import (
+    AxisError,
+    AxisState,
+    Cmd,
+    FrameError,
+    cycle_time,
+    decode,
+    encode,
+    error_names,
+    request,
+)
 
 
 def test_design_worked_example():
@@ -92,8 +101,13 @@ def test_cantools_cli_decodes_a_candump_log_of_our_frames(tmp_path):
 def test_steady_flow_frames_are_the_bytes_cantools_makes_from_the_dbc():
     """encode/decode pack the two steady-flow frames with a struct: same bytes and values as
     cantools' own codec from the DBC, for ordinary, tiny, huge and signed values."""
-    from transport.odrive_frames import (ENCODER_ESTIMATES, INPUT_VEL, FLOAT_FRAMES, database,
-                                         float32_layout)
+    from transport.odrive_frames import (
+        ENCODER_ESTIMATES,
+        FLOAT_FRAMES,
+        INPUT_VEL,
+        database,
+        float32_layout,
+    )
     values = [0.0, -0.0, 1e-40, 1.0 / 3.0, -123.456789, 5e7, 3.3e38, -3.3e38]
     for cmd, frame in FLOAT_FRAMES.items():
         names = frame.names

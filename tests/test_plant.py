@@ -54,8 +54,8 @@ def test_sitl_plant_moves_each_robot_along_its_wheels_arc():
     """Straight, turning on the spot, turning while driving, and a robot whose drivers are
     heard from late: each pose is the closed-form unicycle motion of its wheel speeds."""
     from agent.kinematics import TWO_PI, body_velocity, wrap_angle
-    from firmware_sim.sitl_plant import PlantRobot
     from common.payloads import ObstaclesMsg, TruthMsg
+    from firmware_sim.sitl_plant import PlantRobot
 
     robot = RobotParams()
     speeds = [(2.0, 2.0), (3.0, -3.0), (0.5, 1.5), (1.0, 2.0)]
@@ -129,7 +129,8 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
     for k in range(20):
         plant.step(dt, dt * k, 100.0 + dt * k)
         advance(pose, np.array([[v_cmd, u_cmd, 0.0]]), wheels, False, robot.wheel_radius,
-                robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1, np.ones(1, bool),
+                robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1,
+                np.ones(1, bool),
                 np.zeros((2, 1, 2)))
         turns += wheels[0] * dt
         v, u = body_velocity(TWO_PI * wheels[0, 0], TWO_PI * wheels[0, 1], robot.wheel_radius,

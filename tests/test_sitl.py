@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
+from helpers import alive, free_port
 
 from common.payloads import MissionMsg
 from firmware_sim.batch import SimOptions, simulate
 from hil.run_folder import read_run
 from hil.scenario import load_scenario
-from helpers import alive, free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"

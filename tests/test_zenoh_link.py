@@ -31,7 +31,8 @@ def state(rid, seq, stamp):
 
 def test_keys():
     k = Keys("demo")
-    assert k.state(3) == "boundswarm/demo/robot/3/state" and k.robot(3) == "boundswarm/demo/robot/3"
+    assert k.state(3) == "boundswarm/demo/robot/3/state"
+    assert k.robot(3) == "boundswarm/demo/robot/3"
     assert k.mission == "boundswarm/demo/mission" and Keys.robot_id_of(k.truth(12)) == 12
     with pytest.raises(ValueError, match="swarm name"):
         Keys("a/b")

@@ -194,13 +194,13 @@ class MavlinkLink:
     """The MAVLink side of robot ``system_id``, polled by its loop (see the module doc)."""
 
     def __init__(self, transport: Transport, vehicle: VehicleControl, system_id: int,
-                 settings: MavlinkSettings = MavlinkSettings(),
+                 settings: MavlinkSettings | None = None,
                  signing_key: bytes | None = None,
                  wall: Callable[[], float] | None = None, params: Sequence[Param] = ()):
         if not 1 <= system_id <= 255:
             raise ValueError(f"MAVLink system id must be in 1..255, got {system_id}")
         self.transport, self.vehicle, self.system_id = transport, vehicle, system_id
-        self.s = settings
+        self.s = settings if settings is not None else MavlinkSettings()
         self.params = ParamTable(params)
         self.counters = LinkCounters()
         self._tx = mav2.MAVLink(transport, srcSystem=system_id, srcComponent=COMPONENT_ID)

@@ -105,8 +105,8 @@ AxisState.__doc__ = "ODrive axis states (from the DBC value table)."
 AxisError = enum.IntFlag("AxisError", {v: k for k, v in
                                        _choices("Heartbeat", "Axis_Error").items() if k})
 AxisError.__doc__ = "ODrive axis error bits (from the DBC value table)."
-ControlMode = enum.IntEnum("ControlMode", {v: k for k, v in
-                                           _choices("Set_Controller_Mode", "Control_Mode").items()})
+ControlMode = enum.IntEnum("ControlMode", {
+    v: k for k, v in _choices("Set_Controller_Mode", "Control_Mode").items()})
 InputMode = enum.IntEnum("InputMode", {v: k for k, v in
                                        _choices("Set_Controller_Mode", "Input_Mode").items()})
 

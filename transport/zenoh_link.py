@@ -371,7 +371,8 @@ class SwarmLink:
     def publish(self, state: StateMsg) -> None:
         payload = state.encode()
         self._pub.put(payload)
-        now = time.monotonic()          # schedules only: a step of the wall clock must not stall them
+        # schedules only: a step of the wall clock must not stall them
+        now = time.monotonic()
         if now >= self._beacon_due:
             self._beacon.put(payload)
             self._beacon_due = now + self.BEACON_PERIOD
