@@ -68,7 +68,7 @@ class EmulatedAxis:
     watchdog: float = drivers.WATCHDOG       # s, 0 disables
     coast_tau: float = 0.3           # s, spin-down time constant when IDLE
     bus_voltage: float = 24.0        # V
-    state: AxisState = AxisState.IDLE
+    state: int = AxisState.IDLE      # an AxisState member
     error: int = 0                   # AxisError bits
     control_mode: int = ControlMode.VELOCITY_CONTROL
     input_mode: int = InputMode.VEL_RAMP

@@ -20,7 +20,7 @@ from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
-from typing import Iterator, NamedTuple
+from typing import Any, Iterator, NamedTuple
 
 import can
 import cantools
@@ -45,7 +45,10 @@ class Cmd(enum.IntEnum):
 def database() -> cantools.database.can.Database:
     """The project's DBC, loaded once."""
     text = resources.files("transport").joinpath("odrive.dbc").read_text()
-    return cantools.database.load_string(text, database_format="dbc")
+    db = cantools.database.load_string(text, database_format="dbc")
+    if not isinstance(db, cantools.database.can.Database):     # load_string may load others
+        raise TypeError(f"odrive.dbc loaded as {type(db).__name__}, not a CAN database")
+    return db
 
 
 def _layout(cmd: Cmd) -> cantools.database.can.Message:
@@ -80,8 +83,12 @@ class FloatFrame(NamedTuple):
     @classmethod
     def of(cls, cmd: Cmd, *names: str) -> "FloatFrame":
         signals = [_layout(cmd).get_signal_by_name(n) for n in names]
-        return cls(float32_layout(cmd, *names), names,
-                   tuple((s.minimum, s.maximum) for s in signals))
+        limits = []
+        for s in signals:
+            if s.minimum is None or s.maximum is None:
+                raise ValueError(f"{_layout(cmd).name}.{s.name} has no DBC limits")
+            limits.append((s.minimum, s.maximum))
+        return cls(float32_layout(cmd, *names), names, tuple(limits))
 
 
 # The steady flow (about 100 frames per second per axis each way) packed by a struct checked
@@ -96,19 +103,31 @@ INPUT_VEL = FLOAT_FRAMES[Cmd.SET_INPUT_VEL].packer
 
 def _choices(message: str, signal: str) -> dict[int, str]:
     sig = database().get_message_by_name(f"Axis0_{message}").get_signal_by_name(signal)
+    if sig.choices is None:
+        raise ValueError(f"Axis0_{message}.{signal} has no value table in the DBC")
     return {int(k): str(v) for k, v in sig.choices.items()}
 
 
-AxisState = enum.IntEnum("AxisState", {v: k for k, v in
-                                       _choices("Heartbeat", "Axis_State").items()})
+def _dbc_enum(kind: enum.EnumMeta, name: str, table: dict[int, str]) -> Any:
+    """The enum ``name`` of kind ``kind`` with a member per entry of a DBC value table.
+
+    The ODrive enums below are built at run time from the DBC's value tables: the DBC is
+    their one source of truth, and a hand-written copy for the type checker would be a
+    second one to keep in step. mypy cannot know the members of an enum built from a
+    computed table (and rejects a direct ``IntEnum(name, table)`` call), so this returns Any:
+    member access such as ``AxisState.IDLE`` is not checked by mypy; a misspelt member
+    raises AttributeError when the code using it runs."""
+    return kind(name, {v: k for k, v in table.items()})
+
+
+AxisState = _dbc_enum(enum.IntEnum, "AxisState", _choices("Heartbeat", "Axis_State"))
 AxisState.__doc__ = "ODrive axis states (from the DBC value table)."
-AxisError = enum.IntFlag("AxisError", {v: k for k, v in
-                                       _choices("Heartbeat", "Axis_Error").items() if k})
+AxisError = _dbc_enum(enum.IntFlag, "AxisError",
+                      {k: v for k, v in _choices("Heartbeat", "Axis_Error").items() if k})
 AxisError.__doc__ = "ODrive axis error bits (from the DBC value table)."
-ControlMode = enum.IntEnum("ControlMode", {
-    v: k for k, v in _choices("Set_Controller_Mode", "Control_Mode").items()})
-InputMode = enum.IntEnum("InputMode", {v: k for k, v in
-                                       _choices("Set_Controller_Mode", "Input_Mode").items()})
+ControlMode = _dbc_enum(enum.IntEnum, "ControlMode",
+                        _choices("Set_Controller_Mode", "Control_Mode"))
+InputMode = _dbc_enum(enum.IntEnum, "InputMode", _choices("Set_Controller_Mode", "Input_Mode"))
 
 
 _ERRORS = tuple(sorted(AxisError, key=lambda e: e.value))
@@ -193,8 +212,11 @@ def decode(msg: can.Message) -> Frame:
         signals = dict(zip(fast.names, values))
         finite = all(map(math.isfinite, values))
     else:
-        signals = (layout.decode(bytes(msg.data), decode_choices=False, scaling=False)
+        decoded = (layout.decode(bytes(msg.data), decode_choices=False, scaling=False)
                    if layout.signals else {})
+        if not isinstance(decoded, dict):   # a list only for container messages: none here
+            raise TypeError(f"{layout.name} decoded as a container message")
+        signals = decoded
         finite = all(math.isfinite(v) for v in signals.values() if isinstance(v, float))
     if not finite:
         raise FrameError("nonfinite", f"{cmd.name} of node {node}: {signals}")
