@@ -13,9 +13,20 @@ obstacle acts through a virtual agent at the robot's projection on its boundary.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import TYPE_CHECKING
 
 from agent.kinematics import wrap_angle
+
+if TYPE_CHECKING:
+    from typing import Sequence, TypeAlias
+
+    import numpy as np
+    import numpy.typing as npt
+
+    # What the float-sequence parameters of the law receive: lists in an agent, 1-D float64
+    # arrays when numba compiles this source (firmware_sim.compiled). Declared for the type
+    # checker only, so a module numba compiles gains no run-time object.
+    FloatSeq: TypeAlias = Sequence[float] | npt.NDArray[np.float64]
 
 EPS = 1e-9
 HALF_PI = math.pi / 2
@@ -46,8 +57,8 @@ def clearance(x: float, y: float, cx: float, cy: float, r: float) -> float:
     return math.sqrt(dx * dx + dy * dy) - r
 
 
-def corner_takeover(followed: int, side: int, x: float, y: float, obs_x: Sequence[float],
-                    obs_y: Sequence[float], obs_r: Sequence[float], b: float, c: float) -> int:
+def corner_takeover(followed: int, side: int, x: float, y: float, obs_x: FloatSeq,
+                    obs_y: FloatSeq, obs_r: FloatSeq, b: float, c: float) -> int:
     """Index of the obstacle to follow after the corner rule, for a robot at (x, y).
 
     While circling obstacle F on side s (heading phi_F + s pi/2, phi the direction robot ->

@@ -27,7 +27,7 @@ arrays when compiled), and ``math.sqrt`` for lengths. Metres, radians, world fra
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Sequence
+from typing import TYPE_CHECKING, NamedTuple
 
 from agent.avoidance import (
     EPS,
@@ -41,6 +41,9 @@ from agent.avoidance import (
 from agent.config import ControlParams
 from agent.kinematics import wrap_angle
 from common.vocabulary import Mode
+
+if TYPE_CHECKING:
+    from agent.avoidance import FloatSeq
 
 TRACK, AVOID, ROTATE = int(Mode.TRACK), int(Mode.AVOID), int(Mode.ROTATE)
 
@@ -77,8 +80,8 @@ class LawMemory(NamedTuple):
 
 
 def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float,
-             nbr_x: Sequence[float], nbr_y: Sequence[float], obs_x: Sequence[float],
-             obs_y: Sequence[float], obs_r: Sequence[float], mem: LawMemory, p: LawParams,
+             nbr_x: FloatSeq, nbr_y: FloatSeq, obs_x: FloatSeq, obs_y: FloatSeq,
+             obs_r: FloatSeq, mem: LawMemory, p: LawParams,
              dt: float) -> tuple[float, float, int, LawMemory]:
     """One period for one robot: (v [m/s], u [rad/s], mode (a :class:`Mode` value), memory).
 
