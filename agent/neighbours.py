@@ -20,14 +20,21 @@ from agent.kinematics import arc_step
 
 
 class NeighbourState(Protocol):
-    """What a neighbour reports (common.payloads.StateMsg has it)."""
+    """What a neighbour reports (common.payloads.StateMsg has it). Read-only members: the
+    messages are frozen dataclasses."""
 
-    stamp: float    # s, UNIX time
-    x: float        # m
-    y: float        # m
-    theta: float    # rad
-    v: float        # m/s
-    u: float        # rad/s
+    @property
+    def stamp(self) -> float: ...       # s, UNIX time
+    @property
+    def x(self) -> float: ...           # m
+    @property
+    def y(self) -> float: ...           # m
+    @property
+    def theta(self) -> float: ...       # rad
+    @property
+    def v(self) -> float: ...           # m/s
+    @property
+    def u(self) -> float: ...           # rad/s
 
 
 @dataclass

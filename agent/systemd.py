@@ -26,7 +26,7 @@ class Notifier:
         return self.address is not None
 
     def send(self, state: str) -> None:
-        if not self.enabled:
+        if self.address is None:                        # not enabled
             return
         with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as s:
             s.sendto(state.encode(), self.address)

@@ -303,6 +303,12 @@ class TableReader:
             raise self.fail(field, f"expected a list of {size} finite numbers, got {value!r}")
         return tuple(float(x) for x in value)
 
+    def vector2(self, table: Mapping[str, Any], key: str, field: str,
+                default: tuple[float, float] | None = None) -> tuple[float, float]:
+        """:meth:`vector` of size 2, typed as a pair."""
+        x, y = self.vector(table, key, field, 2, default)
+        return x, y
+
     def table(self, doc: Mapping[str, Any], key: str) -> dict[str, Any]:
         value = doc.get(key, {})
         if not isinstance(value, dict):

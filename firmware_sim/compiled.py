@@ -44,7 +44,8 @@ def use_threads(parallel: bool) -> None:
     """Run the ``prange`` loops on all of numba's threads, or on the calling one only."""
     import numba
 
-    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS if parallel else 1)
+    config: Any = numba.config      # its settings are set at run time (from the environment)
+    numba.set_num_threads(config.NUMBA_NUM_THREADS if parallel else 1)
 
 
 def cache_dir(modules: list[types.ModuleType], numba_version: str) -> Path:
@@ -64,12 +65,13 @@ def kernels() -> types.SimpleNamespace:
     import numba
 
     modules = [importlib.import_module(name) for name in SOURCES]
-    previous = numba.config.CACHE_DIR
-    numba.config.CACHE_DIR = str(cache_dir(modules, numba.__version__))
+    config: Any = numba.config      # its settings are set at run time (from the environment)
+    previous = config.CACHE_DIR
+    config.CACHE_DIR = str(cache_dir(modules, numba.__version__))
     try:
         return _compile(modules, numba)
     finally:
-        numba.config.CACHE_DIR = previous
+        config.CACHE_DIR = previous
 
 
 def _compile(modules: list[types.ModuleType], numba: Any) -> types.SimpleNamespace:

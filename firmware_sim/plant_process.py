@@ -16,7 +16,7 @@ import logging
 import math
 import signal
 import time
-from typing import Callable
+from typing import Callable, Iterable
 
 from agent.loop import FixedRateLoop, SystemClock, use_realtime
 from common import drivers
@@ -106,6 +106,12 @@ class RemoteWheels:
         """The cache is closed by its owner."""
 
 
+def _pose(pose: Iterable[float]) -> tuple[float, float, float]:
+    """A scenario pose (x [m], y [m], theta [rad]) as three floats."""
+    x, y, theta = map(float, pose)
+    return x, y, theta
+
+
 def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: float,
                clock: SystemClock, realtime_priority: int = 0) -> dict:
     """Publish truth and obstacles of ``robots`` while moving them in real time until a
@@ -141,7 +147,7 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
     try:
         cache = Latest(session, keys.wheels("*"), WheelsMsg.decode, clock.wall,
                        capacity=64 * len(scenario.ids))
-        robots = [PlantRobot(int(rid), tuple(map(float, pose)),
+        robots = [PlantRobot(int(rid), _pose(pose),
                              RemoteWheels(cache, int(rid), clock.wall), by_positions=True)
                   for rid, pose in zip(scenario.ids, scenario.poses)]
         stats = _run_plant(session, keys, robots, scenario, dt, clock)
@@ -163,21 +169,21 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
     keys = Keys(swarm)
     session = open_session(session_config("client", connect=connect), "the plant")
     robots: list[PlantRobot] = []
+    pairs: dict[int, DriverPair] = {}           # the emulated drivers of robots, by id
     try:
         index = {int(rid): i for i, rid in enumerate(scenario.ids)}
         r = scenario.robot
         for rid in robot_ids:
             bus = open_bus(can_interface, can_channel, port=can_ports.get(rid))
-            drivers = DriverPair(bus)
+            drivers = pairs[rid] = DriverPair(bus)
             drivers.configure(vel_limit=r.wheel_speed_limit, ramp=r.wheel_ramp,
                               watchdog=watchdog)
-            robots.append(PlantRobot(rid, tuple(map(float, scenario.poses[index[rid]])), drivers))
+            robots.append(PlantRobot(rid, _pose(scenario.poses[index[rid]]), drivers))
         stats = _run_plant(session, keys, robots, scenario, dt, clock, realtime_priority)
         stats["cpu_seconds"] = time.process_time()
         stats["wall_seconds"] = time.monotonic() - t0
-        stats["watchdog_trips"] = {rb.robot_id: sum(a.watchdog_trips
-                                                     for a in rb.drivers.axes.values())
-                                   for rb in robots}
+        stats["watchdog_trips"] = {rid: sum(a.watchdog_trips for a in d.axes.values())
+                                   for rid, d in pairs.items()}
         return stats
     finally:
         for rb in robots:

@@ -5,7 +5,7 @@ import time
 from typing import Callable
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeRemainingColumn
 from rich.table import Table
 
 
@@ -17,10 +17,10 @@ class LazyProgress:
         self._console, self._label, self._delay, self._clock = console, label, delay, clock
         self._start = clock()
         self._bar: Progress | None = None
-        self._task = None
+        self._task: TaskID | None = None             # set with _bar
 
     def __call__(self, fraction: float) -> None:
-        if self._bar is None:
+        if self._bar is None or self._task is None:     # both None until the bar shows
             if fraction >= 1.0 or self._clock() - self._start < self._delay:
                 return
             self._bar = Progress(TextColumn("{task.description}"), BarColumn(),

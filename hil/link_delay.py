@@ -93,8 +93,10 @@ class DelayRelay:
         thread, self._thread = self._thread, None
         if thread is None:
             return
+        loop, stop = self._loop, self._stop     # both set before start() returns
         try:
-            self._loop.call_soon_threadsafe(self._stop.set)
+            if loop is not None and stop is not None:
+                loop.call_soon_threadsafe(stop.set)
         except RuntimeError:            # the loop has already ended
             pass
         thread.join(timeout)
@@ -148,7 +150,9 @@ class DelayRelay:
                      c_writer: asyncio.StreamWriter) -> None:
         """One client connection: connect upstream, then relay both ways until both ends
         have closed (or either fails, or the relay closes)."""
-        self._tasks.add(asyncio.current_task())
+        me = asyncio.current_task()
+        if me is not None:                  # always: each connection runs in its own task
+            self._tasks.add(me)
         self.accepted += 1
         peer = c_writer.get_extra_info("peername")
         writers = [c_writer]
@@ -249,7 +253,8 @@ class _Control:
     """The --control file: its content is the one-way delay in milliseconds."""
 
     def __init__(self, path: Path, relay: DelayRelay):
-        self.path, self.relay, self.last = path, relay, None
+        self.path, self.relay = path, relay
+        self.last: str | None = None
 
     def poll(self) -> None:
         try:
@@ -300,6 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     control = _Control(args.control, relay) if args.control else None
+    assert relay.address is not None        # set by start(), which has returned
     host, port = relay.address
     print(f"link_delay: relaying {host}:{port} -> {args.upstream[0]}:{args.upstream[1]}, "
           f"one-way delay {args.delay_ms:g} ms", flush=True)

@@ -75,7 +75,7 @@ ENCODERS: dict[str, Callable[[bytes], tuple[bytes, float]]] = {
 
 
 def _schema(kind: str) -> bytes:
-    props = {f.name: {} for f in dataclasses.fields(MESSAGES[kind])}
+    props: dict[str, dict[str, object]] = {f.name: {} for f in dataclasses.fields(MESSAGES[kind])}
     return json.dumps({"title": f"boundswarm.{kind}", "type": "object",
                        "properties": props}).encode()
 

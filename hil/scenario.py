@@ -142,8 +142,8 @@ def _formation(rd: TableReader, table: dict, n: int, control: ControlParams) -> 
         offsets = formation_offsets(kind, n, spacing)
     formation = Formation(
         offsets=offsets,
-        center0=rd.vector(table, "center0", "[formation] center0", 2, default=(0.0, 0.0)),
-        velocity=rd.vector(table, "velocity", "[formation] velocity", 2, default=(0.0, 0.0)),
+        center0=rd.vector2(table, "center0", "[formation] center0", default=(0.0, 0.0)),
+        velocity=rd.vector2(table, "velocity", "[formation] velocity", default=(0.0, 0.0)),
         omega=rd.number(table, "omega", "[formation] omega", default=0.0))
     need = control.b + control.hysteresis
     if formation.min_spacing() <= need:

@@ -22,6 +22,7 @@ import socket
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Mapping, Protocol
 
 import numpy as np
 from rich.console import Console
@@ -29,7 +30,7 @@ from rich.live import Live
 from rich.table import Table
 
 from agent.settings import AgentSettings, SensingSettings
-from common.payloads import MissionMsg, StateMsg, TruthMsg
+from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
 from common.vocabulary import StateFlags
 from hil.mavlink_router import MavlinkRouter
@@ -107,8 +108,8 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
     else:
         can = CanSettings(interface=opts.can_interface,
                           channel=(opts.can_channel or "vcan{i}").format(i=index, id=rid))
-    return AgentSettings(robot_id=rid, swarm=swarm,
-                         initial_pose=tuple(map(float, sc.poses[index])),
+    x, y, theta = map(float, sc.poses[index])
+    return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=(x, y, theta),
                          control=sc.control, robot=sc.robot, can=can,
                          zenoh=ZenohSettings(mode="client", connect=(endpoint,),
                                              near_radius=opts.near_radius),
@@ -118,7 +119,8 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
                                                  signing_key_file=opts.mavlink_key))
 
 
-def _status_table(sc: Scenario, states: dict, truth: dict, presence: frozenset,
+def _status_table(sc: Scenario, states: Mapping[int, Received[StateMsg]],
+                  truth: Mapping[int, Received[TruthMsg]], presence: frozenset,
                   t: float) -> Table:
     table = Table(title=f"{sc.name}: t = {t:5.1f} s of {sc.duration:g} s", header_style="bold")
     for col in ("robot", "alive", "mode", "flags", "x [m]", "y [m]", "error [m]", "v [m/s]"):
@@ -130,12 +132,18 @@ def _status_table(sc: Scenario, states: dict, truth: dict, presence: frozenset,
                           "-", "-")
             continue
         s, p = st.msg, tr.msg
-        flags = ",".join(f.name for f in StateFlags if s.flags & f) or "-"
+        flags = ",".join(f.name for f in StateFlags if f.name and s.flags & f) or "-"
         err = float(np.hypot(p.x - s.x_d, p.y - s.y_d))
         table.add_row(str(rid), "yes" if rid in presence else "[red]LOST[/red]",
                       MODE_NAMES.get(s.mode, str(s.mode)), flags, f"{p.x:7.2f}", f"{p.y:7.2f}",
                       f"{err:6.2f}", f"{p.v:6.2f}")
     return table
+
+
+class _Closable(Protocol):
+    """What run_sitl opens on its router and closes at the end, in reverse order."""
+
+    def close(self) -> None: ...
 
 
 def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> SitlRun:
@@ -150,7 +158,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
     port = opts.zenoh_port or free_tcp_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     router = open_session(session_config("router", listen=[endpoint]), "the SITL router")
-    opened = []
+    opened: list[_Closable] = []
     try:
         recorder = Recorder(router, keys, out / "run.mcap")
         opened.append(recorder)

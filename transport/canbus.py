@@ -18,6 +18,7 @@ import struct
 import time
 
 import can
+from can.interfaces.udp_multicast import UdpMulticastBus
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 DEFAULT_GROUP = "ff11::b5:1"     # interface-local scope: never routed off the host
@@ -75,7 +76,7 @@ class EchoFilteredBus(can.BusABC):
     skipped.
     """
 
-    def __init__(self, inner: can.BusABC):
+    def __init__(self, inner: UdpMulticastBus):
         self.inner = inner
         self._socket = rx = inner._multicast     # python-can's receiving side of this bus
         self._dest = (rx.group, rx.port)
@@ -167,6 +168,7 @@ def open_bus(interface: str, channel: str | None = None, port: int | None = None
         raise BusOpenError(f"cannot open CAN bus ({what}): {exc}") from None
     if interface != "udp_multicast":
         return bus
+    assert isinstance(bus, UdpMulticastBus)     # what can.Bus makes for this interface
     try:
         return EchoFilteredBus(bus)
     except OSError as exc:

@@ -37,8 +37,11 @@ DEFAULT_BAUD = 57600
 
 
 class Transport(Protocol):
-    dropped: int               # frames not sent
-    datagrams: bool            # True: each recv() is whole frames; False: a byte stream
+    # Read-only members: the stream transports compute ``dropped`` from their out buffer.
+    @property
+    def dropped(self) -> int: ...          # frames not sent
+    @property
+    def datagrams(self) -> bool: ...       # True: each recv() is whole frames; False: a stream
 
     def recv(self) -> bytes: ...
     def write(self, frame: bytes) -> None: ...
@@ -177,22 +180,23 @@ class TcpTransport:
             return
         self._sock, self._connected = sock, err == 0
 
-    def _ready(self) -> bool:
-        """Whether the connection is up, finishing a pending connect without waiting."""
+    def _ready(self) -> socket.socket | None:
+        """The socket if the connection is up (else None), finishing a pending connect
+        without waiting."""
         if self._sock is None:
             self._connect()
-            return False
+            return None
         if not self._connected:
             _, writable, _ = select.select([], [self._sock], [], 0)
             if not writable:
-                return False
+                return None
             err = self._sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
             if err:
                 self._drop(os.strerror(err))
-                return False
+                return None
             self._connected = True
             log.info("tcp %s:%d connected", *self._addr)
-        return True
+        return self._sock
 
     def _drop(self, why: str) -> None:
         if self._connected:
@@ -203,10 +207,11 @@ class TcpTransport:
         self._out.data.clear()           # a new connection starts on a frame boundary
 
     def recv(self) -> bytes:
-        if not self._ready():
+        sock = self._ready()
+        if sock is None:
             return b""
         try:
-            data = self._sock.recv(READ_SIZE)
+            data = sock.recv(READ_SIZE)
         except BlockingIOError:
             return b""
         except OSError as exc:
@@ -217,12 +222,13 @@ class TcpTransport:
         return data
 
     def write(self, frame: bytes) -> None:
-        if not self._ready():
+        sock = self._ready()
+        if sock is None:
             self._out.dropped += 1
             return
         self._out.push(frame)
         try:
-            self._out.flush(self._sock.send)
+            self._out.flush(sock.send)
         except OSError as exc:
             self._drop(exc.strerror or str(exc))
 

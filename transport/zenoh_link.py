@@ -29,7 +29,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Callable, Generic, Iterable, Mapping, TypeVar
+from typing import Any, Callable, Generic, Iterable, Mapping, TypeVar
 
 import zenoh
 
@@ -148,12 +148,16 @@ class Latest(Generic[M]):
         self.received = 0
         self.accepted = 0
         self.dropped: Counter = Counter()
-        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(capacity))
+        self._sub: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = (
+            session.declare_subscriber(key, zenoh.handlers.RingChannel(capacity)))  # None: closed
 
     def _drain(self) -> None:
+        sub = self._sub
+        if sub is None:                 # closed (the callers check first)
+            return
         latest = None
         now = self._clock()
-        while (sample := self._sub.try_recv()) is not None:
+        while (sample := sub.try_recv()) is not None:
             self.received += 1
             try:
                 msg = self._decode(sample.payload.to_bytes())
@@ -269,7 +273,8 @@ class NearStates:
                               ignore=[robot_id])
         # replaced whole (never mutated) by the refocus thread, read by the loop
         self.near: Mapping[int, Latest[StateMsg]] = MappingProxyType({})
-        self._closed = {"received": 0, "accepted": 0, "dropped": Counter()}  # dropped subs
+        # dropped subscriptions' counters: counts, and a Counter of "dropped" by reason
+        self._closed: dict[str, Any] = {"received": 0, "accepted": 0, "dropped": Counter()}
         self._counter_lock = threading.Lock()
         self._snapshot: Mapping[int, Received[StateMsg]] = MappingProxyType({})
         self._focus: tuple[float, float] | None = None
@@ -391,8 +396,9 @@ class SwarmLink:
         return got.msg if got else None
 
     def counters(self) -> dict:
-        out = {"states": self.states.counters(), "obstacles": self._obstacles.counters(),
-               "mission": self._mission.counters()}
+        out: dict[str, object] = {"states": self.states.counters(),
+                                  "obstacles": self._obstacles.counters(),
+                                  "mission": self._mission.counters()}
         if isinstance(self.states, NearStates):
             out["beacons"] = self.states.beacons.counters()
             out["near"] = sorted(self.states.near)
