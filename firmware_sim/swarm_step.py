@@ -54,14 +54,14 @@ def build_grid(px: np.ndarray, py: np.ndarray, cell: float, max_cells: int) -> G
     return start, order, x0, y0, cell, nx, ny
 
 
-def _cells_around(x: float, y: float, x0: float, y0: float, cell: float, nx: int, ny: int
-                  ) -> tuple[int, int, int, int]:
-    """(ix_lo, ix_hi, iy_lo, iy_hi): the 3 x 3 block of cells around (x, y), clipped to the
-    grid; ix_lo > ix_hi when the block misses the grid (a point far outside it)."""
-    ix = int(math.floor((x - x0) / cell))
-    iy = int(math.floor((y - y0) / cell))
-    lo_x, hi_x = max(ix - 1, 0), min(ix + 1, nx - 1)
-    lo_y, hi_y = max(iy - 1, 0), min(iy + 1, ny - 1)
+def _cells_around(x: float, y: float, reach: float, x0: float, y0: float, cell: float,
+                  nx: int, ny: int) -> tuple[int, int, int, int]:
+    """(ix_lo, ix_hi, iy_lo, iy_hi): the cells that overlap the square of half-side
+    ``reach`` [m] around (x, y), clipped to the grid; ix_lo > ix_hi when none does."""
+    lo_x = max(int(math.floor((x - reach - x0) / cell)), 0)
+    hi_x = min(int(math.floor((x + reach - x0) / cell)), nx - 1)
+    lo_y = max(int(math.floor((y - reach - y0) / cell)), 0)
+    hi_y = min(int(math.floor((y + reach - y0) / cell)), ny - 1)
     if lo_y > hi_y:
         hi_x = lo_x - 1
     return lo_x, hi_x, lo_y, hi_y
@@ -77,7 +77,7 @@ def sense_neighbours(i: int, x: float, y: float, sorted_xy: np.ndarray, sensing_
     start, order, x0, y0, cell, nx, ny = grid
     r2 = sensing_range * sensing_range
     m = 0
-    lo_x, hi_x, lo_y, hi_y = _cells_around(x, y, x0, y0, cell, nx, ny)
+    lo_x, hi_x, lo_y, hi_y = _cells_around(x, y, sensing_range, x0, y0, cell, nx, ny)
     for cx in range(lo_x, hi_x + 1):
         # the cells (cx, lo_y..hi_y) are consecutive in the grid's order
         for q in range(start[cx * ny + lo_y], start[cx * ny + hi_y + 1]):
@@ -91,15 +91,16 @@ def sense_neighbours(i: int, x: float, y: float, sorted_xy: np.ndarray, sensing_
     return m
 
 
-def sense_obstacles(x: float, y: float, obs: np.ndarray, sensing_range: float, grid: Grid,
-                    cap: int, out_x: np.ndarray, out_y: np.ndarray, out_r: np.ndarray,
-                    out_k: np.ndarray) -> int:
+def sense_obstacles(x: float, y: float, obs: np.ndarray, sensing_range: float,
+                    max_radius: float, grid: Grid, cap: int, out_x: np.ndarray,
+                    out_y: np.ndarray, out_r: np.ndarray, out_k: np.ndarray) -> int:
     """The obstacles (K, 3) whose surface is within ``sensing_range`` [m] of (x, y) (``grid``
     of their centres, cells at least the range plus the largest radius): centres, radii
     and indices in the first entries of the outputs (at most ``cap``); returns how many."""
     start, order, x0, y0, cell, nx, ny = grid
     k = 0
-    lo_x, hi_x, lo_y, hi_y = _cells_around(x, y, x0, y0, cell, nx, ny)
+    lo_x, hi_x, lo_y, hi_y = _cells_around(x, y, sensing_range + max_radius, x0, y0, cell, nx,
+                                           ny)
     for cx in range(lo_x, hi_x + 1):
         for q in range(start[cx * ny + lo_y], start[cx * ny + hi_y + 1]):
             kk = order[q]
@@ -110,6 +111,73 @@ def sense_obstacles(x: float, y: float, obs: np.ndarray, sensing_range: float, g
                                                               obs[kk, 2], kk)
                 k += 1
     return k
+
+
+def _control_range(lo: int, hi: int, pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray,
+                   offsets: np.ndarray, motion: np.ndarray, t: float, obs: np.ndarray,
+                   p: LawParams, period: float, sensing_range: float, a: float, reach: float,
+                   cap: int, watch_cap: int, sorted_xy: np.ndarray, grid: Grid,
+                   obs_grid: Grid, outs: tuple[np.ndarray, ...]) -> tuple[int, int]:
+    """:func:`control` for robots lo..hi - 1: returns (capacity, watch capacity) needed."""
+    out_cmd, out_ref, out_mem_f, out_mem_i, out_near, watch_j, watch_k = outs
+    need, need_watch = 0, 0
+    max_r = obs[:, 2].max() if len(obs) else 0.0
+    nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
+    nbr_j = np.empty(cap, np.int64)
+    o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
+    o_k = np.empty(cap, np.int64)
+    for i in range(lo, hi):
+        x, y = pose[i, 0], pose[i, 1]
+        m = sense_neighbours(i, x, y, sorted_xy, sensing_range, grid, cap, nbr_x, nbr_y,
+                             nbr_d, nbr_j)
+        k = sense_obstacles(x, y, obs, sensing_range, max_r, obs_grid, cap, o_x, o_y, o_r,
+                            o_k)
+        need = max(need, m, k)
+        if m > cap or k > cap:
+            continue
+        rx, ry, rvx, rvy = reference_point(offsets[i, 0], offsets[i, 1], motion[0],
+                                           motion[1], motion[2], motion[3], motion[4], t)
+        mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
+                        mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4])
+        v, u, mode, new = law_step(x, y, pose[i, 2], rx, ry, nbr_x[:m], nbr_y[:m],
+                                   o_x[:k], o_y[:k], o_r[:k], mem, p, period)
+        out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2] = v, u, mode
+        out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
+        out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey
+        out_mem_f[i, 2], out_mem_f[i, 3], out_mem_f[i, 4] = (new.center_x, new.center_y,
+                                                             new.radius)
+        out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
+                                                             int(new.avoiding), new.side)
+        # what to watch during the period
+        nearest = math.inf
+        for q in range(m):
+            nearest = min(nearest, nbr_d[q])
+        out_near[i, 0] = nearest
+        limit = max(nearest, a) + 4.0 * reach
+        w = 0
+        for q in range(m):
+            if nbr_j[q] > i and nbr_d[q] <= limit:
+                if w < watch_cap:
+                    watch_j[i, w] = nbr_j[q]
+                w += 1
+        if w < watch_cap:
+            watch_j[i, w] = -1
+        lowest = math.inf
+        for q in range(k):
+            dx, dy = o_x[q] - x, o_y[q] - y
+            lowest = min(lowest, math.sqrt(dx * dx + dy * dy) - o_r[q])
+        out_near[i, 1] = lowest
+        wk = 0
+        for q in range(k):
+            dx, dy = o_x[q] - x, o_y[q] - y
+            if math.sqrt(dx * dx + dy * dy) - o_r[q] <= lowest + 2.0 * reach:
+                if wk < watch_cap:
+                    watch_k[i, wk] = o_k[q]
+                wk += 1
+        if wk < watch_cap:
+            watch_k[i, wk] = -1
+        need_watch = max(need_watch, w + 1, wk + 1)
+    return need, need_watch
 
 
 def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray,
@@ -135,71 +203,26 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
     incomplete: call again with the capacities returned.
     """
     n, k_obs = len(pose), len(obs)
-    grid = build_grid(pose[:, 0], pose[:, 1], sensing_range, 4 * n + 64)
+    # cells of half the search reach: the squares searched cover less area than with whole
+    # ones (4 or 5 cells a side instead of 3)
+    grid = build_grid(pose[:, 0], pose[:, 1], sensing_range / 2, 4 * n + 64)
     sorted_xy = np.empty((n, 2))
     for q in range(n):
         sorted_xy[q, 0], sorted_xy[q, 1] = pose[grid[1][q], 0], pose[grid[1][q], 1]
     max_r = obs[:, 2].max() if k_obs else 0.0
-    obs_grid = build_grid(obs[:, 0], obs[:, 1], sensing_range + max_r, 4 * k_obs + 64)
+    obs_grid = build_grid(obs[:, 0], obs[:, 1], (sensing_range + max_r) / 2,
+                          4 * max(n, k_obs) + 64)
     chunks = min(n, 64)
-    need = np.zeros(chunks, np.int64)
-    need_watch = np.zeros(chunks, np.int64)
+    need = np.zeros((chunks, 2), np.int64)
+    outs = (out_cmd, out_ref, out_mem_f, out_mem_i, out_near, watch_j, watch_k)
     for chunk in prange(chunks):
-        nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
-        nbr_j = np.empty(cap, np.int64)
-        o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
-        o_k = np.empty(cap, np.int64)
-        for i in range(chunk * n // chunks, (chunk + 1) * n // chunks):
-            x, y = pose[i, 0], pose[i, 1]
-            m = sense_neighbours(i, x, y, sorted_xy, sensing_range, grid, cap, nbr_x, nbr_y,
-                                 nbr_d, nbr_j)
-            k = sense_obstacles(x, y, obs, sensing_range, obs_grid, cap, o_x, o_y, o_r, o_k)
-            need[chunk] = max(need[chunk], m, k)
-            if m > cap or k > cap:
-                continue
-            rx, ry, rvx, rvy = reference_point(offsets[i, 0], offsets[i, 1], motion[0],
-                                               motion[1], motion[2], motion[3], motion[4], t)
-            mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
-                            mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4])
-            v, u, mode, new = law_step(x, y, pose[i, 2], rx, ry, nbr_x[:m], nbr_y[:m],
-                                       o_x[:k], o_y[:k], o_r[:k], mem, p, period)
-            out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2] = v, u, mode
-            out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
-            out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey
-            out_mem_f[i, 2], out_mem_f[i, 3], out_mem_f[i, 4] = (new.center_x, new.center_y,
-                                                                 new.radius)
-            out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
-                                                                 int(new.avoiding), new.side)
-            # what to watch during the period
-            nearest = math.inf
-            for q in range(m):
-                nearest = min(nearest, nbr_d[q])
-            out_near[i, 0] = nearest
-            limit = max(nearest, a) + 4.0 * reach
-            w = 0
-            for q in range(m):
-                if nbr_j[q] > i and nbr_d[q] <= limit:
-                    if w < watch_cap:
-                        watch_j[i, w] = nbr_j[q]
-                    w += 1
-            if w < watch_cap:
-                watch_j[i, w] = -1
-            lowest = math.inf
-            for q in range(k):
-                dx, dy = o_x[q] - x, o_y[q] - y
-                lowest = min(lowest, math.sqrt(dx * dx + dy * dy) - o_r[q])
-            out_near[i, 1] = lowest
-            wk = 0
-            for q in range(k):
-                dx, dy = o_x[q] - x, o_y[q] - y
-                if math.sqrt(dx * dx + dy * dy) - o_r[q] <= lowest + 2.0 * reach:
-                    if wk < watch_cap:
-                        watch_k[i, wk] = o_k[q]
-                    wk += 1
-            if wk < watch_cap:
-                watch_k[i, wk] = -1
-            need_watch[chunk] = max(need_watch[chunk], w + 1, wk + 1)
-    return (need.max(), need_watch.max()) if chunks else (0, 0)
+        # the robots of a chunk in a plain function: numba optimises it better than the
+        # body of a parallel loop
+        need[chunk, 0], need[chunk, 1] = _control_range(
+            chunk * n // chunks, (chunk + 1) * n // chunks, pose, mem_f, mem_i, offsets,
+            motion, t, obs, p, period, sensing_range, a, reach, cap, watch_cap, sorted_xy,
+            grid, obs_grid, outs)
+    return (need[:, 0].max(), need[:, 1].max()) if chunks else (0, 0)
 
 
 def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,

@@ -1,0 +1,59 @@
+"""Run one benchmark script from this checkout and from another commit, alternately.
+
+    .venv/bin/python bench/side_by_side.py REV [--rounds 2] -- bench/batch_scaling.py --sizes 1000
+
+The machine is shared and its speed drifts over minutes, so figures of two commits are only
+comparable when measured in the same run, interleaved: this checks REV out into a temporary
+git worktree, then runs ``SCRIPT ARGS`` from each checkout in turn (each importing its own
+code: PYTHONPATH is the checkout), ``--rounds`` times, printing each output under a header.
+The worktree is removed at the end, also on failure or Ctrl-C.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def run_in(checkout: Path, script: list[str]) -> str:
+    env = dict(os.environ, PYTHONPATH=str(checkout))
+    done = subprocess.run([sys.executable, *script], cwd=checkout, env=env,
+                          capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(script)} failed in {checkout} "
+                         f"(exit {done.returncode}):\n{done.stderr}")
+    return done.stdout
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("rev", help="the other commit (hash, tag, branch)")
+    ap.add_argument("--rounds", type=int, default=2)
+    argv = sys.argv[1:]
+    if "--" not in argv or argv.index("--") == len(argv) - 1:
+        ap.error("give the benchmark after --, e.g. -- bench/batch_scaling.py")
+    cut = argv.index("--")
+    args, script = ap.parse_args(argv[:cut]), argv[cut + 1:]
+    label = subprocess.run(["git", "rev-parse", "--short", args.rev], cwd=ROOT, check=True,
+                           capture_output=True, text=True).stdout.strip()
+    with tempfile.TemporaryDirectory() as tmp:
+        other = Path(tmp) / "other"
+        subprocess.run(["git", "worktree", "add", "--detach", str(other), args.rev], cwd=ROOT,
+                       check=True, capture_output=True)
+        try:
+            for r in range(args.rounds):
+                for name, checkout in ((label, other), ("this checkout", ROOT)):
+                    print(f"=== round {r + 1}, {name}: {' '.join(script)}", flush=True)
+                    print(run_in(checkout, script), flush=True)
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(other)], cwd=ROOT,
+                           check=False, capture_output=True)
+
+
+if __name__ == "__main__":
+    main()
