@@ -399,6 +399,19 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         parser.add_argument(flag, **kwargs)
 
 
+def add_argument_for(parser: argparse.ArgumentParser | argparse._ArgumentGroup, flag: str,
+                     cls: type, name: str) -> None:
+    """Add ``flag`` for field ``name`` of section ``cls``: its type, default, unit and doc
+    (for commands whose flags keep their own names; bounds are checked when the section is
+    built from the value)."""
+    f = next((f for f in fields(cls) if f.name == name), None)
+    if f is None or f.is_section:
+        raise ValueError(f"{cls.__name__} has no setting {name!r}")
+    unit = f" [{f.unit}]" if f.unit else ""
+    parser.add_argument(flag, type=f.type, default=f.default,
+                        help=f"{f.doc}{unit} (default: %(default)s)")
+
+
 def section_from_args(cls: type[T], args: argparse.Namespace, prefix: str = "") -> T:
     """Section ``cls`` from the flags :func:`add_arguments` added (validated: a bad value
     raises :class:`ConfigError` naming the flag)."""

@@ -131,12 +131,12 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     pos = np.zeros((S + 1, n, 2))
     dmin, cmin = np.zeros(S + 1), np.zeros(S + 1)
     cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
+    watch_j, watch_k = np.empty((n, watch_cap), np.int64), np.empty((n, watch_cap), np.int64)
+    hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
     for step in range(steps + 1):
         t = step * T
         t0 = clock() if clock else 0.0
         while True:
-            watch_j = np.full((n, watch_cap), -1, np.int64)
-            watch_k = np.full((n, watch_cap), -1, np.int64)
             need, need_watch = k.control(pose, mem_f, mem_i, offsets, motion, t, obs, params, T,
                                          options.sensing_range, control.a, reach, cap,
                                          watch_cap, cmd, ref, new_f, new_i, near, watch_j,
@@ -144,10 +144,13 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             if need <= cap and need_watch <= watch_cap:
                 break
             cap, watch_cap = max(cap, int(need)), max(watch_cap, int(need_watch))
+            watch_j = np.empty((n, watch_cap), np.int64)
+            watch_k = np.empty((n, watch_cap), np.int64)
+            hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
         if clock:
             law_seconds += clock() - t0
         mem_f, new_f, mem_i, new_i = new_f, mem_f, new_i, mem_i
-        v, u, mode = cmd[:, 0].copy(), cmd[:, 1].copy(), cmd[:, 2].astype(np.int8)
+        v, u, mode = cmd[:, 0], cmd[:, 1], cmd[:, 2]       # views, overwritten next period
         err = np.hypot(pose[:, 0] - ref[:, 0], pose[:, 1] - ref[:, 1])
         metrics.observe_control(t, err, tolerance(ref[:, 2:], control.K), v, u, mode)
         if every and step % every == 0:
@@ -166,11 +169,14 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             k.advance(pose, cmd, wheels, ideal, robot.wheel_radius, robot.wheel_base,
                       robot.wheel_speed_limit, robot.wheel_ramp, dt, S, watched, pos)
         n_sub = 1 if last else S + 1
-        hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
-        k.geometry(pos[:n_sub], watch_j, watch_k, obs, control.a, first, pair_limit,
-                   clear_limit, watched, dmin, cmin, hit_j, hit_k)
-        pairs = [(int(ids[i]), int(ids[watch_j[i, w]])) for i, w in zip(*np.nonzero(hit_j))]
-        inside = [int(ids[i]) for i in np.flatnonzero(hit_k.any(axis=1))]
+        hits = k.geometry(pos[:n_sub], watch_j, watch_k, obs, control.a, first, pair_limit,
+                          clear_limit, watched, dmin, cmin, hit_j, hit_k)
+        pairs: list[tuple[int, int]] = []
+        inside: list[int] = []
+        if hits:
+            pairs = [(int(ids[i]), int(ids[watch_j[i, w]])) for i, w in zip(*np.nonzero(hit_j))]
+            inside = [int(ids[i]) for i in np.flatnonzero(hit_k.any(axis=1))]
+            hit_j[:], hit_k[:] = False, False
         for s in range(first, n_sub):
             metrics.observe_extremes(t + s * dt, float(dmin[s]), float(cmin[s]), pairs, inside)
         if last:

@@ -203,15 +203,12 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
     incomplete: call again with the capacities returned.
     """
     n, k_obs = len(pose), len(obs)
-    # cells of half the search reach: the squares searched cover less area than with whole
-    # ones (4 or 5 cells a side instead of 3)
-    grid = build_grid(pose[:, 0], pose[:, 1], sensing_range / 2, 4 * n + 64)
+    grid = build_grid(pose[:, 0], pose[:, 1], sensing_range, 4 * n + 64)
     sorted_xy = np.empty((n, 2))
     for q in range(n):
         sorted_xy[q, 0], sorted_xy[q, 1] = pose[grid[1][q], 0], pose[grid[1][q], 1]
     max_r = obs[:, 2].max() if k_obs else 0.0
-    obs_grid = build_grid(obs[:, 0], obs[:, 1], (sensing_range + max_r) / 2,
-                          4 * max(n, k_obs) + 64)
+    obs_grid = build_grid(obs[:, 0], obs[:, 1], sensing_range + max_r, 4 * max(n, k_obs) + 64)
     chunks = min(n, 64)
     need = np.zeros((chunks, 2), np.int64)
     outs = (out_cmd, out_ref, out_mem_f, out_mem_i, out_near, watch_j, watch_k)
@@ -264,13 +261,13 @@ def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
 def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.ndarray,
              a: float, first: int, pair_limit: float, clear_limit: float,
              watched: np.ndarray, out_dmin: np.ndarray, out_cmin: np.ndarray,
-             hit_j: np.ndarray, hit_k: np.ndarray) -> None:
+             hit_j: np.ndarray, hit_k: np.ndarray) -> int:
     """Closest pair and smallest clearance at each substep s >= ``first`` of ``pos`` (S, N,
     2), over the watch lists of :func:`control` of the ``watched`` robots, for the pairs
     no farther than ``pair_limit`` [m] and the obstacles no farther than ``clear_limit`` [m]
     at the period's start: out_dmin, out_cmin (S,) [m] (inf: none). hit_j / hit_k (N, cap)
     are set where a watched pair came closer than a / a robot centre entered a watched
-    obstacle.
+    obstacle; returns how many robots set one.
 
     Robots move at most ``reach`` per period, so with pair_limit = max(closest pair, a) +
     4 reach and clear_limit = max(smallest clearance, 0) + 2 reach the minima and the hits
@@ -279,6 +276,7 @@ def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.
     n_sub, n = pos.shape[0], pos.shape[1]
     d_robot = np.full((n_sub, n), np.inf)
     c_robot = np.full((n_sub, n), np.inf)
+    hit = np.zeros(n, np.int64)
     for i in prange(n):
         if not watched[i]:
             continue
@@ -296,6 +294,7 @@ def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.
                 d_robot[s, i] = min(d_robot[s, i], d)
                 if d < a:
                     hit_j[i, w] = True
+                    hit[i] = 1
         for w in range(watch_k.shape[1]):
             k = watch_k[i, w]
             if k < 0:
@@ -309,8 +308,10 @@ def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.
                 c_robot[s, i] = min(c_robot[s, i], c)
                 if c < 0.0:
                     hit_k[i, w] = True
+                    hit[i] = 1
     for s in range(n_sub):
         out_dmin[s], out_cmin[s] = math.inf, math.inf
         for i in range(n):
             out_dmin[s] = min(out_dmin[s], d_robot[s, i])
             out_cmin[s] = min(out_cmin[s], c_robot[s, i])
+    return hit.sum()

@@ -25,6 +25,8 @@ from rich.console import Console, Group
 from rich.live import Live
 from rich.table import Table
 
+from agent.config import RobotParams
+from common.schema import add_argument_for
 from hil.can_inspect import BusStats
 from hil.cli_options import Subparsers, add_can_options, positive
 from hil.exit_codes import EXIT_BAD_INPUT, EXIT_OK, BadInput
@@ -237,8 +239,7 @@ def add_parser(sub: Subparsers) -> None:
         p.add_argument("--run", help="SITL run folder (with --robot)")
         p.add_argument("--robot", type=int, help="robot id in the run manifest")
         p.add_argument("--bitrate", type=int, default=500_000, help="bit/s, for the bus load")
-        p.add_argument("--vel-limit", type=float, default=10.0,
-                       help="rev/s; set-points at it raise an alarm")
+        add_argument_for(p, "--vel-limit", RobotParams, "wheel_speed_limit")
         p.add_argument("--node", type=int, action="append", help="only this node (repeatable)")
         p.add_argument("--message", action="append",
                        help="only this message, e.g. HEARTBEAT (repeatable)")

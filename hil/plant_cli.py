@@ -20,6 +20,9 @@ from typing import Any
 
 from rich.console import Console
 
+from agent.config import RobotParams
+from common import drivers
+from common.schema import add_argument_for
 from hil.cli_options import (
     Subparsers,
     add_can_options,
@@ -29,6 +32,7 @@ from hil.cli_options import (
     zenoh_client,
 )
 from hil.exit_codes import EXIT_OK, BadInput
+from transport.settings import CanSettings
 
 FLAG_FORMS = {"--drivers-only": "drivers", "--world-only": "world"}
 
@@ -60,7 +64,8 @@ def add_parser(sub: Subparsers) -> None:
     add_can_options(p)
     p.add_argument("--can-base-port", type=int,
                    help="robot ID's udp_multicast bus is on port BASE + ID")
-    p.add_argument("--watchdog", type=float, default=0.1, help="s (0 disables)")
+    p.add_argument("--watchdog", type=float, default=drivers.WATCHDOG,
+                   help="s (0 disables; default: %(default)s)")
     p.add_argument("--realtime-priority", type=priority, default=0, metavar="P",
                    help="the plant's loop runs SCHED_FIFO at P (0: normal scheduling)")
     p.add_argument("--stats", help="write loop statistics (JSON) at exit")
@@ -69,11 +74,12 @@ def add_parser(sub: Subparsers) -> None:
     p = modes.add_parser("drivers", help="one robot's emulated drivers on a bus (HIL bench)")
     add_can_options(p)
     p.add_argument("--can-port", type=int, help="udp_multicast port of the bus")
-    p.add_argument("--left-node", type=int, default=0, help="left wheel node id")
-    p.add_argument("--right-node", type=int, default=1, help="right wheel node id")
-    p.add_argument("--vel-limit", type=float, default=10.0, help="rev/s")
-    p.add_argument("--ramp", type=float, default=1000.0, help="rev/s^2")
-    p.add_argument("--watchdog", type=float, default=0.1, help="s (0 disables)")
+    add_argument_for(p, "--left-node", CanSettings, "left_node")
+    add_argument_for(p, "--right-node", CanSettings, "right_node")
+    add_argument_for(p, "--vel-limit", RobotParams, "wheel_speed_limit")
+    add_argument_for(p, "--ramp", RobotParams, "wheel_ramp")
+    p.add_argument("--watchdog", type=float, default=drivers.WATCHDOG,
+                   help="s (0 disables; default: %(default)s)")
     p.add_argument("--rate", type=_drivers_rate, default=200.0, metavar="HZ",
                    help="loop rate (encoder estimates go out at 100 Hz)")
     p.add_argument("--robot", type=int, help="with zenoh: the robot id of the wheels")
@@ -134,13 +140,17 @@ def run_drivers(args: argparse.Namespace, console: Console) -> int:
             if args.zenoh_config or args.zenoh_connect else None)
     if conf is not None and (args.robot is None or args.swarm is None):
         raise BadInput("with --zenoh-config or --zenoh-connect, give --robot and --swarm")
+    # the flags' values checked as the settings they are (bad values: exit 2, field named)
+    limits = RobotParams(wheel_speed_limit=args.vel_limit, wheel_ramp=args.ramp)
+    nodes = CanSettings(left_node=args.left_node, right_node=args.right_node)
     bus = open_bus(args.can_interface, args.can_channel, port=args.can_port)
-    drivers = DriverPair(bus, right_node=args.right_node, left_node=args.left_node)
-    drivers.configure(vel_limit=args.vel_limit, ramp=args.ramp, watchdog=args.watchdog)
+    pair = DriverPair(bus, left_node=nodes.left_node, right_node=nodes.right_node)
+    pair.configure(vel_limit=limits.wheel_speed_limit, ramp=limits.wheel_ramp,
+                   watchdog=args.watchdog)
     console.print(f"emulated drivers (nodes {args.left_node} left, {args.right_node} "
                   f"right) on {args.can_interface} {args.can_channel or ''}; Ctrl-C stops")
     if conf is None:
-        run_drivers_only(drivers, rate=args.rate)
+        run_drivers_only(pair, rate=args.rate)
         return EXIT_OK
     from common.payloads import WheelsMsg
     from transport.zenoh_link import Keys, open_session
@@ -154,7 +164,7 @@ def run_drivers(args: argparse.Namespace, console: Console) -> int:
         pub.put(WheelsMsg(args.robot, seq[0], stamp, right_pos, left_pos, right_vel,
                           left_vel).encode())
     try:
-        run_drivers_only(drivers, rate=args.rate, publish_wheels=publish)
+        run_drivers_only(pair, rate=args.rate, publish_wheels=publish)
     finally:
         session.close()
     return EXIT_OK

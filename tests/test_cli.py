@@ -170,3 +170,19 @@ def test_plant_drivers_with_zenoh_needs_robot_and_swarm(capsys):
     assert main(["plant", "drivers", "--can-interface", "virtual", "--can-channel", "t",
                  "--zenoh-connect", "tcp/127.0.0.1:1"]) == 2
     assert "--robot and --swarm" in capsys.readouterr().err
+
+
+def test_drivers_flags_take_their_defaults_and_bounds_from_the_settings_schema(capsys):
+    """`plant drivers`' limits are RobotParams' and CanSettings' fields: their defaults and
+    units in the help, a value out of their bounds refused naming the setting."""
+    from agent.config import RobotParams
+    from hil.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["plant", "drivers", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert f"[rev/s] (default: {RobotParams().wheel_speed_limit})" in help_text
+    assert f"[rev/s^2] (default: {RobotParams().wheel_ramp})" in help_text
+    code = main(["plant", "drivers", "--can-interface", "virtual", "--vel-limit", "-1"])
+    assert code == 2
+    assert "wheel_speed_limit" in capsys.readouterr().err

@@ -9,10 +9,10 @@ from firmware_sim.world import Obstacles
 def sensed(pos, obs, rng_m=8.0, cap=64):
     """{(i, j)} neighbours and {(i, k)} obstacles that the search finds."""
     pose = np.column_stack([pos, np.zeros(len(pos))])
-    grid = build_grid(pose[:, 0], pose[:, 1], rng_m / 2, 4 * len(pos) + 64)
+    grid = build_grid(pose[:, 0], pose[:, 1], rng_m, 4 * len(pos) + 64)
     o = np.column_stack([obs.centers, obs.radii]).reshape(-1, 3)
     max_r = o[:, 2].max() if len(o) else 0.0
-    ogrid = build_grid(o[:, 0], o[:, 1], (rng_m + max_r) / 2, 4 * len(o) + 64)
+    ogrid = build_grid(o[:, 0], o[:, 1], rng_m + max_r, 4 * len(o) + 64)
     bufs = [np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap, np.int64)]
     nb, ob = set(), set()
     sorted_xy = pos[grid[1]]
