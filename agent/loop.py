@@ -135,3 +135,10 @@ def use_realtime(priority: int) -> bool:
         return False
     log.info("thread %s: SCHED_FIFO priority %d", threading.current_thread().name, priority)
     return True
+
+
+def use_normal_scheduling() -> None:
+    """Put the calling thread back under normal scheduling (SCHED_OTHER): for the work after
+    a real-time loop has ended (statistics, closing sessions), which must not hold up the
+    loops of other processes at the loop's priority."""
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))

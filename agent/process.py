@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from agent.config import CONTROL_PARAMS
-from agent.loop import FixedRateLoop, SystemClock, use_realtime
+from agent.loop import FixedRateLoop, SystemClock, use_normal_scheduling, use_realtime
 from agent.node import Agent
 from agent.settings import AgentSettings
 from agent.systemd import Notifier
@@ -115,6 +115,8 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         finally:
             notifier.stopping()
             agent.shutdown()
+            if realtime:
+                use_normal_scheduling()     # what is left is bookkeeping
         stats = {"robot_id": s.robot_id, "loop": loop.stats.summary(),
                  "cpu_seconds": time.process_time(), "wall_seconds": time.monotonic() - t0,
                  "agent": agent.counters.summary(), "zenoh": swarm.counters(),

@@ -47,11 +47,15 @@ def check_drivers_rate(rate: float) -> float:
 def run_drivers_only(drivers: DriverPair, rate: float = 200.0,
                      max_ticks: int | None = None,
                      publish_wheels: Callable[..., None] | None = None,
-                     publish_period: float = 0.01) -> None:
+                     publish_period: float = 0.01, realtime_priority: int = 0) -> None:
     """Serve ``drivers`` at ``rate`` [Hz] until a signal (or ``max_ticks``); the axes advance
     by the time that really passed (at most MAX_STEP after a stall). ``publish_wheels(
     right_pos, left_pos, right_vel, left_vel, stamp)``, when given, is called every
-    ``publish_period`` [s], for a world simulated on another host."""
+    ``publish_period`` [s], for a world simulated on another host. ``realtime_priority`` >
+    0: the loop runs SCHED_FIFO at it (emulated hardware, which on a robot is a separate
+    board, must not starve when the robot computer's loops load this one)."""
+    if realtime_priority:
+        use_realtime(realtime_priority)
     clock = SystemClock()
     loop = FixedRateLoop(1.0 / check_drivers_rate(rate), clock)
     _stop_on_signals(loop.stop)
@@ -83,6 +87,7 @@ class RemoteWheels:
     def __init__(self, cache: Latest, robot_id: int, clock: Callable[[], float],
                  stale: float = 0.1):
         self.cache, self.robot_id, self.clock, self.stale = cache, robot_id, clock, stale
+        self.stamp: float | None = None       # wall time [s] of the report last read
 
     def fileno(self) -> None:
         """No bus here: the drivers are remote."""
@@ -98,9 +103,14 @@ class RemoteWheels:
         if got is None:
             return None          # not heard from yet: the robot stays where it is
         m = got.msg
+        self.stamp = m.stamp
         if self.clock() - m.stamp > self.stale:
             return m.right_pos, m.left_pos, 0.0, 0.0
         return m.right_pos, m.left_pos, m.right_vel, m.left_vel
+
+    def reported_at(self) -> float | None:
+        """Wall time [s] of the report last read (None before the first)."""
+        return self.stamp
 
     def close(self) -> None:
         """The cache is closed by its owner."""
@@ -137,7 +147,8 @@ def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: floa
     return loop.stats.summary()
 
 
-def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
+def run_world(scenario, swarm: str, conf, dt: float = 0.005, realtime_priority: int = 0
+              ) -> dict:
     """The world of a multi-host SITL: robots roll as the wheels of their remote drivers
     turn (published positions); truth and obstacle detections published. Runs until a
     signal."""
@@ -147,10 +158,10 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005) -> dict:
     try:
         cache = Latest(session, keys.wheels("*"), WheelsMsg.decode, clock.wall,
                        capacity=64 * len(scenario.ids))
-        robots = [PlantRobot(int(rid), _pose(pose),
-                             RemoteWheels(cache, int(rid), clock.wall), by_positions=True)
-                  for rid, pose in zip(scenario.ids, scenario.poses)]
-        stats = _run_plant(session, keys, robots, scenario, dt, clock)
+        wheels = [RemoteWheels(cache, int(rid), clock.wall) for rid in scenario.ids]
+        robots = [PlantRobot(w.robot_id, _pose(pose), w, reported_at=w.reported_at)
+                  for w, pose in zip(wheels, scenario.poses)]
+        stats = _run_plant(session, keys, robots, scenario, dt, clock, realtime_priority)
         cache.close()
         return stats
     finally:

@@ -49,7 +49,7 @@ class DriverPair(Protocol):
     def wheel_state(self) -> tuple[float, float, float, float] | None: ...
     # (right, left) positions [rev], then (right, left) actual speeds [rev/s]; None while
     # nothing is known yet (remote drivers not heard from). The plant reads the speeds of
-    # local drivers and the positions of remote ones (PlantRobot.by_positions).
+    # local drivers and the positions of remote ones (PlantRobot.reported_at).
     def close(self) -> None: ...
 
 
@@ -60,10 +60,11 @@ class PlantRobot:
     drivers: DriverPair
     v: float = 0.0            # m/s, actual (held over the last physics step)
     u: float = 0.0            # rad/s, actual (held over the last physics step)
-    # remote drivers (multi-host world): the robot rolls through the arc its wheels' reported
-    # positions turned since the last report, so a late or lost report delays the motion
-    # but never loses it
-    by_positions: bool = False
+    # remote drivers (multi-host world): the wall time [s] of their last report. The robot
+    # rolls through the arc its wheels' reported positions turned since the last report (a
+    # late or lost report delays the motion but never loses it), and its truth is stamped
+    # at the report: where the robot was then, not a late view of it stamped now
+    reported_at: Callable[[], float | None] | None = None
     last_turns: tuple[float, float] | None = None     # rev, (right, left) last applied
 
 
@@ -101,7 +102,7 @@ class SitlPlant:
             state = rb.drivers.wheel_state()
             if state is None:
                 continue
-            if rb.by_positions:
+            if rb.reported_at is not None:
                 self._roll_to(rb, state[0], state[1], dt)
                 continue
             _, _, right, left = state            # speeds at the step's end [rev/s]
@@ -112,8 +113,9 @@ class SitlPlant:
         if self._steps % self.truth_every == 0:
             self._seq += 1
             for rb in self.robots:
+                stamp = rb.reported_at() if rb.reported_at is not None else None
                 self.publish("truth", rb.robot_id,
-                             TruthMsg(rb.robot_id, self._seq, now_w, *rb.pose,
+                             TruthMsg(rb.robot_id, self._seq, stamp or now_w, *rb.pose,
                                       rb.v, rb.u).encode())
         if now_m >= self._next_obstacles:
             self._next_obstacles = now_m + self.obstacles_period

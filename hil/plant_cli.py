@@ -82,6 +82,8 @@ def add_parser(sub: Subparsers) -> None:
                    help="s (0 disables; default: %(default)s)")
     p.add_argument("--rate", type=_drivers_rate, default=200.0, metavar="HZ",
                    help="loop rate (encoder estimates go out at 100 Hz)")
+    p.add_argument("--realtime-priority", type=priority, default=0, metavar="P",
+                   help="the drivers' loop runs SCHED_FIFO at P (0: normal scheduling)")
     p.add_argument("--robot", type=int, help="with zenoh: the robot id of the wheels")
     p.add_argument("--swarm", type=swarm_name, help="with zenoh: Zenoh key prefix")
     add_zenoh_client_options(p, required=False, config="--zenoh-config",
@@ -93,6 +95,8 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--swarm", required=True, type=swarm_name, help="Zenoh key prefix")
     add_zenoh_client_options(p, required=True, config="--zenoh-config",
                              connect="--zenoh-connect")
+    p.add_argument("--realtime-priority", type=priority, default=0, metavar="P",
+                   help="the world's loop runs SCHED_FIFO at P (0: normal scheduling)")
     p.add_argument("--stats", help="write loop statistics (JSON) at exit")
     p.set_defaults(func=run_world)
 
@@ -150,7 +154,7 @@ def run_drivers(args: argparse.Namespace, console: Console) -> int:
     console.print(f"emulated drivers (nodes {args.left_node} left, {args.right_node} "
                   f"right) on {args.can_interface} {args.can_channel or ''}; Ctrl-C stops")
     if conf is None:
-        run_drivers_only(pair, rate=args.rate)
+        run_drivers_only(pair, rate=args.rate, realtime_priority=args.realtime_priority)
         return EXIT_OK
     from common.payloads import WheelsMsg
     from transport.zenoh_link import Keys, open_session
@@ -164,7 +168,8 @@ def run_drivers(args: argparse.Namespace, console: Console) -> int:
         pub.put(WheelsMsg(args.robot, seq[0], stamp, right_pos, left_pos, right_vel,
                           left_vel).encode())
     try:
-        run_drivers_only(pair, rate=args.rate, publish_wheels=publish)
+        run_drivers_only(pair, rate=args.rate, publish_wheels=publish,
+                         realtime_priority=args.realtime_priority)
     finally:
         session.close()
     return EXIT_OK
@@ -176,6 +181,6 @@ def run_world(args: argparse.Namespace, console: Console) -> int:
     from hil.scenario import load_scenario
     sc = load_scenario(args.scenario)
     conf = zenoh_client(args.zenoh_config, args.zenoh_connect)
-    stats = run_remote_world(sc, args.swarm, conf)
+    stats = run_remote_world(sc, args.swarm, conf, realtime_priority=args.realtime_priority)
     _write_stats(args.stats, stats)
     return EXIT_OK

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.deploy import deploy, load_manifest
+from hil.deploy import REALTIME_PRIORITY, deploy, load_manifest
 from hil.recorder import read_messages
 from hil.scenario import load_scenario
 from hil.sitl_report import analyse_recording, missed_in
@@ -246,6 +246,8 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
         hosts.start(hosts.ground, "world", ["plant", "world", "--scenario",
                                             "scenario.toml", "--swarm", "field",
                                             "--zenoh-config", "ground-client.json5",
+                                            # physics, not a robot's computer: never starved
+                                            "--realtime-priority", str(REALTIME_PRIORITY + 1),
                                             "--stats", str(logs / "world.json")],
                     ground, logs)
         recorder = hosts.start(hosts.ground, "recorder",
@@ -256,7 +258,10 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
             hosts.start(hosts.robot_ns[r], f"drivers_{r}",
                         ["plant", "drivers", "--can-interface", "udp_multicast",
                          "--can-channel", "ff11::b5:1", "--can-port", "43300", "--robot",
-                         str(r), "--swarm", "field", "--zenoh-config", drivers_conf[r]], b, logs)
+                         str(r), "--swarm", "field", "--zenoh-config", drivers_conf[r],
+                         # a robot's drivers are boards of their own: never starved by the
+                         # robot computer's loops (SCHED_FIFO at REALTIME_PRIORITY)
+                         "--realtime-priority", str(REALTIME_PRIORITY + 1)], b, logs)
             hosts.start(hosts.robot_ns[r], f"agent_{r}",
                         ["agent", "--config", "agent.toml", "--stats",
                          str(logs / f"agent_{r}.json")], b, logs)

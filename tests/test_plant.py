@@ -246,12 +246,20 @@ def test_remote_robot_rolls_through_its_reported_wheel_turns_late_or_not():
     from firmware_sim.sitl_plant import PlantRobot
 
     robot = RobotParams()
-    prompt = PlantRobot(1, (0.0, 0.0, 0.3), _LateReports(2.0, 1.0, every=1), by_positions=True)
-    late = PlantRobot(2, (0.0, 0.0, 0.3), _LateReports(2.0, 1.0, every=7), by_positions=True)
-    plant = _plant([prompt, late], robot)
+    sent = []
+    prompt = PlantRobot(1, (0.0, 0.0, 0.3), _LateReports(2.0, 1.0, every=1),
+                        reported_at=lambda: 50.0)
+    late = PlantRobot(2, (0.0, 0.0, 0.3), _LateReports(2.0, 1.0, every=7),
+                      reported_at=lambda: 60.0)
+    plant = _plant([prompt, late], robot, sent)
     for k in range(42):
         plant.step(0.005, 0.005 * k, 100.0 + 0.005 * k)
     assert late.pose == pytest.approx(prompt.pose, abs=1e-12)
+    # its truth is stamped when its wheels were reported where they put it, not now
+    from common.payloads import TruthMsg
+    stamps = {TruthMsg.decode(d).robot_id: TruthMsg.decode(d).stamp
+              for kind, _, d in sent if kind == "truth"}
+    assert stamps == {1: 50.0, 2: 60.0}
     assert prompt.pose[0] > 0.3                        # it did move (~0.4 m)
     # the speed-driven robot of the same wheels agrees with the position-driven ones
     local = PlantRobot(3, (0.0, 0.0, 0.3), _Wheels(2.0, 1.0))

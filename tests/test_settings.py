@@ -204,6 +204,22 @@ def test_realtime_priority_applies_to_the_calling_thread_only():
     assert os.sched_getscheduler(0) == os.SCHED_OTHER      # this thread untouched
 
 
+def test_normal_scheduling_again_after_the_loop():
+    """The agent's bookkeeping after its loop ends runs normally scheduled (it must not hold
+    up other processes' loops at the loop's priority)."""
+    got: dict = {}
+
+    def loop_thread() -> None:
+        got["granted"] = loop.use_realtime(10)
+        loop.use_normal_scheduling()
+        got["policy"] = os.sched_getscheduler(0)
+
+    t = threading.Thread(target=loop_thread)
+    t.start()
+    t.join()
+    assert got["policy"] == os.SCHED_OTHER
+
+
 def test_zenoh_threads_inherit_the_scheduling_of_the_thread_that_opens_the_session():
     """The agent relies on it to run Zenoh's threads one step under its loop (and, when
     SCHED_FIFO is not granted, on every thread staying normally scheduled)."""
