@@ -181,3 +181,25 @@ def test_near_radius_below_the_sensing_range_is_refused(tmp_path):
                    '[zenoh]\nnear_radius = 5.0\n[sensing]\nrange = 8.0\n')
     with pytest.raises(ConfigError, match=r"\[zenoh\] near_radius.*at least the sensing range"):
         load_settings(cfg)
+
+
+def test_a_client_waits_for_a_router_that_starts_after_it():
+    """Agents and plants start with their router, not after it: a client retries for a
+    while instead of failing on the first refused connection."""
+    import threading
+
+    from helpers import free_port
+    port = free_port("tcp")
+    endpoint = f"tcp/127.0.0.1:{port}"
+    routers = []
+    starter = threading.Timer(0.5, lambda: routers.append(
+        open_session(session_config("router", listen=[endpoint]), "late router")))
+    starter.start()
+    try:
+        client = open_session(session_config("client", connect=[endpoint]), "early client")
+        client.close()
+    finally:
+        starter.join()
+        for r in routers:
+            r.close()
+    assert routers

@@ -40,6 +40,9 @@ log = logging.getLogger(__name__)
 M = TypeVar("M")
 
 
+CONNECT_TIMEOUT_MS = 10_000    # how long a client keeps trying to reach its router
+
+
 def session_config(mode: str, listen: Iterable[str] = (), connect: Iterable[str] = (),
                    extra: Mapping[str, object] | None = None) -> zenoh.Config:
     """A Zenoh config with multicast scouting off and only the given endpoints.
@@ -54,6 +57,12 @@ def session_config(mode: str, listen: Iterable[str] = (), connect: Iterable[str]
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if mode == "client":
+        # a client (agent, plant) started with its router, or before it, retries instead of
+        # failing on the first refused connection (zenoh's default for clients)
+        conf.insert_json5("connect/timeout_ms", json.dumps(CONNECT_TIMEOUT_MS))
+        conf.insert_json5("connect/retry", json.dumps(
+            {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}))
     for key, value in (extra or {}).items():
         conf.insert_json5(key, json.dumps(value))
     return conf
