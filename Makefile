@@ -38,6 +38,8 @@ sim: $(STAMP)
 
 test: $(STAMP) system-packages
 	-$(BIN)/python -m hil.uml ensure
+	$(BIN)/ruff check .
+	$(BIN)/mypy
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)
