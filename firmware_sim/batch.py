@@ -21,7 +21,7 @@ from agent.config import ControlParams, RobotParams
 from agent.formation import Formation
 from agent.law import LawParams
 from firmware_sim import compiled, swarm_step
-from firmware_sim.metrics import RunMetrics, tolerance
+from firmware_sim.metrics import TOLERANCE_MARGIN, RunMetrics
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles
 
@@ -127,6 +127,7 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     mem_f, mem_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
     new_f, new_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
     cmd, ref, near = np.zeros((n, 3)), np.zeros((n, 4)), np.zeros((n, 2))
+    last_mode, err, within = np.zeros(n), np.zeros(n), np.zeros(n, bool)
     wheels = np.zeros((n, 2))
     pos = np.zeros((S + 1, n, 2))
     dmin, cmin = np.zeros(S + 1), np.zeros(S + 1)
@@ -151,8 +152,9 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             law_seconds += clock() - t0
         mem_f, new_f, mem_i, new_i = new_f, mem_f, new_i, mem_i
         v, u, mode = cmd[:, 0], cmd[:, 1], cmd[:, 2]       # views, overwritten next period
-        err = np.hypot(pose[:, 0] - ref[:, 0], pose[:, 1] - ref[:, 1])
-        metrics.observe_control(t, err, tolerance(ref[:, 2:], control.K), v, u, mode)
+        max_v, max_u, switches, all_within = k.period_summary(
+            pose, cmd, ref, control.K, TOLERANCE_MARGIN, step == 0, last_mode, err, within)
+        metrics.observe_period(t, max_v, max_u, switches, err, within, all_within)
         if every and step % every == 0:
             r = step // every
             rec_t[r], rec_pose[r], rec_v[r], rec_u[r] = t, pose, v, u

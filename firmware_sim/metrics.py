@@ -79,13 +79,23 @@ class RunMetrics:
     def observe_control(self, t: float, error: np.ndarray, tol: np.ndarray, v: np.ndarray,
                         u: np.ndarray, mode: np.ndarray) -> None:
         """Tracking error norms (N,) [m] against tolerances (N,), commands and modes at t."""
-        self.max_abs_v = max(self.max_abs_v, float(np.abs(v).max(initial=0.0)))
-        self.max_abs_u = max(self.max_abs_u, float(np.abs(u).max(initial=0.0)))
-        if self._last_mode is not None:
-            self.mode_switches += int(np.count_nonzero(mode != self._last_mode))
+        switches = (0 if self._last_mode is None
+                    else int(np.count_nonzero(mode != self._last_mode)))
         self._last_mode = mode.copy()
         within = error <= tol
-        if not within.all():
+        self.observe_period(t, float(np.abs(v).max(initial=0.0)),
+                            float(np.abs(u).max(initial=0.0)), switches, error, within,
+                            bool(within.all()))
+
+    def observe_period(self, t: float, max_abs_v: float, max_abs_u: float, switches: int,
+                       error: np.ndarray, within: np.ndarray, all_within: bool) -> None:
+        """A period's summary at t [s]: largest |v| [m/s] and |u| [rad/s], mode switches
+        since the last period, each robot's tracking error [m] and whether it is within
+        its tolerance. ``error`` and ``within`` are kept as the final ones (not copied)."""
+        self.max_abs_v = max(self.max_abs_v, max_abs_v)
+        self.max_abs_u = max(self.max_abs_u, max_abs_u)
+        self.mode_switches += switches
+        if not all_within:
             self._last_bad_t = t
         self._seen_t.append(t)
         self._final_err, self._final_within = error, within

@@ -315,3 +315,24 @@ def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.
             out_dmin[s] = min(out_dmin[s], d_robot[s, i])
             out_cmin[s] = min(out_cmin[s], c_robot[s, i])
     return hit.sum()
+
+
+def period_summary(pose: np.ndarray, cmd: np.ndarray, ref: np.ndarray, K: float,
+                   margin: float, first: bool, last_mode: np.ndarray, out_err: np.ndarray,
+                   out_within: np.ndarray) -> tuple[float, float, int, bool]:
+    """The period's convergence and command metrics: each robot's tracking error [m]
+    (out_err) and whether it is within |p_d_dot| / K + ``margin`` (out_within); returns
+    (max |v| [m/s], max |u| [rad/s], mode switches since ``last_mode`` (none when
+    ``first``), all within). ``last_mode`` is updated to this period's modes."""
+    max_v, max_u, switches, all_within = 0.0, 0.0, 0, True
+    for i in range(len(pose)):
+        ex, ey = pose[i, 0] - ref[i, 0], pose[i, 1] - ref[i, 1]
+        out_err[i] = math.sqrt(ex * ex + ey * ey)
+        tol = math.sqrt(ref[i, 2] * ref[i, 2] + ref[i, 3] * ref[i, 3]) / K + margin
+        out_within[i] = out_err[i] <= tol
+        all_within = all_within and out_within[i]
+        max_v, max_u = max(max_v, abs(cmd[i, 0])), max(max_u, abs(cmd[i, 1]))
+        if not first and cmd[i, 2] != last_mode[i]:
+            switches += 1
+        last_mode[i] = cmd[i, 2]
+    return max_v, max_u, switches, all_within
