@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
@@ -58,6 +59,8 @@ def add_parser(sub: Subparsers) -> None:
 
     p = modes.add_parser("sitl", help="robots of a scenario, each with its drivers on its bus")
     p.add_argument("--scenario", required=True, help="scenario file (TOML)")
+    p.add_argument("--robot", metavar="FILE",
+                   help="robot profile (robots/*.toml) instead of the scenario's [robot]")
     p.add_argument("--swarm", required=True, type=swarm_name, help="Zenoh key prefix")
     p.add_argument("--zenoh-connect", required=True, action="append", help="router endpoint")
     p.add_argument("--robots", help="comma-separated robot ids to host (default all)")
@@ -117,8 +120,11 @@ def _write_stats(path: str | None, stats: dict[str, Any]) -> None:
 def run_sitl(args: argparse.Namespace, console: Console) -> int:
     """Host the robots of the scenario until SIGINT/SIGTERM."""
     from firmware_sim.plant_process import run_sitl_plant
+    from hil.robot_profile import load_robot_profile
     from hil.scenario import load_scenario
     sc = load_scenario(args.scenario)
+    if args.robot:
+        sc = dataclasses.replace(sc, robot=load_robot_profile(args.robot))
     known = [int(i) for i in sc.ids]
     try:
         ids = [int(x) for x in args.robots.split(",")] if args.robots else known

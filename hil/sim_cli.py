@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -14,12 +15,15 @@ from hil.exit_codes import EXIT_OK, EXIT_UNSAFE
 
 
 def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser("sim", help="batch simulation of a scenario (in-process, vectorised)")
+    p = sub.add_parser("sim", help="batch simulation of a scenario (in-process, compiled)")
     p.add_argument("scenario", help="scenario file (TOML)")
     p.add_argument("--out", required=True, help="run folder to write")
     p.add_argument("--duration", type=float, help="override the scenario's duration [s]")
     p.add_argument("--plant", choices=[k.value for k in PlantKind],
-                   help="ideal unicycle, or wheels with the drivers' speed limit and ramp")
+                   help="ideal unicycle, or wheels with the drivers' speed limit and ramp "
+                        "(default: the scenario's; wheels with --robot)")
+    p.add_argument("--robot", metavar="FILE",
+                   help="robot profile (robots/*.toml) instead of the scenario's [robot]")
     p.add_argument("--substeps", type=int, help="physics steps per control period")
     p.add_argument("--record-every", type=int, default=1, metavar="K",
                    help="record one control period in K (0: metrics only, no figures)")
@@ -34,12 +38,16 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from firmware_sim.batch import SimOptions, simulate
     from hil import run_folder
     from hil.figures import draw_figures
+    from hil.robot_profile import load_robot_profile
     from hil.scenario import load_scenario
     sc = load_scenario(args.scenario)
+    plant = PlantKind(args.plant) if args.plant else sc.plant
+    if args.robot:                  # a real robot's limits apply unless --plant says not
+        sc = dataclasses.replace(sc, robot=load_robot_profile(args.robot))
+        plant = PlantKind(args.plant) if args.plant else PlantKind.WHEELS
     options = SimOptions(duration=args.duration or sc.duration,
                          sensing_range=sc.sensing_range,
-                         substeps=args.substeps or sc.substeps,
-                         plant=PlantKind(args.plant) if args.plant else sc.plant,
+                         substeps=args.substeps or sc.substeps, plant=plant,
                          record_every=args.record_every)
     if options.plant is PlantKind.WHEELS:
         check_braking_margin(sc.control, sc.robot, strict=args.strict)
@@ -50,6 +58,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     elapsed = time.perf_counter() - started
     metrics = result.metrics.summary(sc.name, options.duration)
     metrics["plant"] = options.plant.value
+    metrics["robot"] = dataclasses.asdict(sc.robot)
     metrics["compute_seconds"] = round(elapsed, 3)
     out = Path(args.out)
     data = run_folder.RunData.from_result(result)

@@ -71,6 +71,7 @@ class SitlOptions:
     startup_timeout: float = 40.0       # s
     lead_time: float = 1.5              # s between the mission message and its epoch
     live: bool = True                   # live status table on a terminal
+    robot_profile: str | None = None    # absolute path of the robot profile the plants use
 
 
 @dataclass
@@ -249,6 +250,8 @@ def _start_plants(children: Children, sc: Scenario, opts: SitlOptions, swarm: st
                 "--swarm", swarm, "--zenoh-connect", endpoint,
                 "--can-interface", opts.can_interface,
                 "--stats", str(out / "logs" / f"plant_{k // size}.json")]
+        if opts.robot_profile:
+            args += ["--robot", opts.robot_profile]
         if opts.realtime_priority:      # the emulated hardware ahead of the agents
             args += ["--realtime-priority", str(min(opts.realtime_priority + 1, 99))]
         if opts.can_interface == "udp_multicast":

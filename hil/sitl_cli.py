@@ -26,6 +26,9 @@ def add_parser(sub: Subparsers) -> None:
     add_can_options(p)
     p.add_argument("--can-base-port", type=int, default=43200,
                    help="udp_multicast: robot ID's bus on port BASE + ID")
+    p.add_argument("--robot", metavar="FILE",
+                   help="robot profile (robots/*.toml) instead of the scenario's [robot]: the "
+                        "emulated drivers' limits and the agents' robot settings")
     p.add_argument("--robots-per-plant", type=int, default=0,
                    help="robots hosted by one plant process (0: all in one)")
     p.add_argument("--no-live", action="store_true", help="no live status table")
@@ -69,19 +72,23 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from agent.settings import near_radius_problem
     from hil import run_folder
     from hil.figures import draw_figures
+    from hil.robot_profile import load_robot_profile
     from hil.scenario import load_scenario
     from hil.sitl import SitlError, SitlOptions, run_sitl
     from hil.sitl_report import analyse_recording
     sc = load_scenario(args.scenario)
     if args.duration:
         sc = dataclasses.replace(sc, duration=args.duration)
+    if args.robot:
+        sc = dataclasses.replace(sc, robot=load_robot_profile(args.robot))
     out = Path(args.out)
     opts = SitlOptions(can_interface=args.can_interface, can_channel=args.can_channel,
                        can_base_port=args.can_base_port,
                        robots_per_plant=args.robots_per_plant, live=not args.no_live,
                        gcs_port=args.gcs_port, near_radius=args.near_radius,
                        mavlink_key=_mavlink_key(args.mavlink_key),
-                       realtime_priority=args.realtime_priority)
+                       realtime_priority=args.realtime_priority,
+                       robot_profile=str(Path(args.robot).resolve()) if args.robot else None)
     if problem := near_radius_problem(opts.near_radius, sc.sensing_range):
         raise BadInput(f"--near-radius {problem}")
     started = time.perf_counter()
@@ -92,6 +99,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         return EXIT_NOT_RUN
     data, result, extra = analyse_recording(out / "run.mcap", sc)
     metrics = result.summary(sc.name, sc.duration)
+    metrics["robot"] = dataclasses.asdict(sc.robot)
     metrics["sitl"] = _sitl_metrics(swarm, extra["epoch"], sc.duration,
                                     time.perf_counter() - started)
     run_folder.write_run(out, metrics, data, sc.source.read_text() if sc.source else None)
