@@ -76,6 +76,8 @@ class RobotParams:
     wheel_speed_limit: float = _param(drivers.SPEED_LIMIT, "rev/s",
                                       "driver velocity limit per wheel")
     wheel_ramp: float = _param(drivers.RAMP, "rev/s^2", "driver velocity ramp rate (VEL_RAMP)")
+    drive_latency: float = _param(0.0, "s", "from a command leaving the computer to the "
+                                  "drivers applying it (CAN, driver loop)", open_lo=False)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -116,11 +118,12 @@ def braking_margin(control: ControlParams, robot: RobotParams,
     """Budget check (docs/controller.md): v_max*T_eff + v_max^2/(2 a_max) <= (b - a)/2.
 
     ``data_age`` [s] is the age of neighbour data that extrapolation does not remove; the
-    effective reaction time is ``control.period + data_age``.
+    effective reaction time is ``control.period + data_age + robot.drive_latency``.
     """
     v = min(control.v_max, robot.v_wheel_max)
-    return BrakingMargin(v_max=v, reaction=v * (control.period + data_age),
-                         stopping=v * v / (2.0 * robot.a_max), budget=(control.b - control.a) / 2)
+    reaction = control.period + data_age + robot.drive_latency
+    return BrakingMargin(v_max=v, reaction=v * reaction, stopping=v * v / (2.0 * robot.a_max),
+                         budget=(control.b - control.a) / 2)
 
 
 def check_braking_margin(control: ControlParams, robot: RobotParams, data_age: float = 0.0,

@@ -128,6 +128,10 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     new_f, new_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
     cmd, ref, near = np.zeros((n, 3)), np.zeros((n, 4)), np.zeros((n, 2))
     last_mode, err, within = np.zeros(n), np.zeros(n), np.zeros(n, bool)
+    # wheels plant: drive latency in whole substeps; the commands of the last substeps, at
+    # rest before the first period
+    lag = 0 if ideal else int(round(robot.drive_latency / dt))
+    issued = np.zeros((S + lag, n, 2))
     wheels = np.zeros((n, 2))
     pos = np.zeros((S + 1, n, 2))
     dmin, cmin = np.zeros(S + 1), np.zeros(S + 1)
@@ -165,11 +169,15 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         pair_limit = max(float(near[:, 0].min(initial=np.inf)), control.a) + 4.0 * reach
         clear_limit = max(float(near[:, 1].min(initial=np.inf)), 0.0) + 2.0 * reach
         watched = (near[:, 0] <= pair_limit) | (near[:, 1] <= clear_limit)
+        # the commands the drivers follow in each substep (issued a drive latency earlier)
+        issued[:-S] = issued[S:]
+        issued[-S:] = cmd[:, :2]
         if last:
             pos[0] = pose[:, :2]
         else:
-            k.advance(pose, cmd, wheels, ideal, robot.wheel_radius, robot.wheel_base,
-                      robot.wheel_speed_limit, robot.wheel_ramp, dt, S, watched, pos)
+            k.advance(pose, issued[len(issued) - S - lag:len(issued) - lag], wheels, ideal,
+                      robot.wheel_radius, robot.wheel_base, robot.wheel_speed_limit,
+                      robot.wheel_ramp, dt, S, watched, pos)
         n_sub = 1 if last else S + 1
         hits = k.geometry(pos[:n_sub], watch_j, watch_k, obs, control.a, first, pair_limit,
                           clear_limit, watched, dmin, cmin, hit_j, hit_k)

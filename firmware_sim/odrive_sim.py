@@ -28,7 +28,7 @@ import heapq
 import logging
 import math
 import random
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -156,7 +156,9 @@ class DriverPair:
     rng: random.Random = field(default_factory=lambda: random.Random(0))
     ignored: Counter = field(default_factory=Counter)
     sent: int = 0
+    latency: float = 0.0      # s, from a velocity command's arrival to the axis applying it
     _due: dict = field(default_factory=dict)     # node -> [heartbeat, encoder] next due [s]
+    _commands: deque = field(default_factory=deque)   # (due [s], axis, Input_Vel [rev/s])
     _queue: list = field(default_factory=list)
     _now: float = 0.0
 
@@ -186,6 +188,9 @@ class DriverPair:
         self._now = now
         while receive and (msg := self.bus.recv(0.0)) is not None:
             self._receive(msg)
+        while self._commands and self._commands[0][0] <= now:
+            _, axis, vel = self._commands.popleft()
+            axis.input_vel(vel)
         for node, axis in self.axes.items():
             due = self._due.get(node)
             if due is None:
@@ -246,7 +251,10 @@ class DriverPair:
             return
         s = frame.signals
         if frame.cmd == Cmd.SET_INPUT_VEL:
-            axis.input_vel(s["Input_Vel"])
+            if self.latency > 0.0:         # the drive latency of the robot's profile
+                self._commands.append((self._now + self.latency, axis, s["Input_Vel"]))
+            else:
+                axis.input_vel(s["Input_Vel"])
         elif frame.cmd == Cmd.SET_AXIS_STATE:
             axis.request_state(int(s["Axis_Requested_State"]))
         elif frame.cmd == Cmd.SET_CONTROLLER_MODE:

@@ -186,7 +186,7 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
         r = scenario.robot
         for rid in robot_ids:
             bus = open_bus(can_interface, can_channel, port=can_ports.get(rid))
-            drivers = pairs[rid] = DriverPair(bus)
+            drivers = pairs[rid] = DriverPair(bus, latency=r.drive_latency)
             drivers.configure(vel_limit=r.wheel_speed_limit, ramp=r.wheel_ramp,
                               watchdog=watchdog)
             robots.append(PlantRobot(rid, _pose(scenario.poses[index[rid]]), drivers))

@@ -227,28 +227,31 @@ def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
             dt: float, substeps: int, watched: np.ndarray, out_pos: np.ndarray) -> None:
     """Move every robot through ``substeps`` physics steps of ``dt`` [s]; pose updated.
 
-    ``ideal``: the commands (v, u) of ``cmd`` applied exactly (one exact arc from the
+    ``ideal``: the commands (v, u) of ``cmd[0]`` applied exactly (one exact arc from the
     period's start, evaluated at each substep; only at the period's end for robots not
-    ``watched``). Otherwise through the wheel drivers: set-points of :func:`wheel_command`
-    (speed limit [rev/s]), wheel speeds ``wheels`` (N, 2) (right, left) [rev/s] ramped at
-    ``ramp`` [rev/s^2] and held over each substep. out_pos (substeps + 1, N, 2): positions
-    at the period's start and after each substep (of the watched robots at least).
+    ``watched``). Otherwise through the wheel drivers: in substep s the drivers follow the
+    commands ``cmd[s - 1]`` (substeps, N, >= 2) (those issued a drive latency earlier),
+    set-points of :func:`wheel_command` (speed limit [rev/s]), wheel speeds ``wheels``
+    (N, 2) (right, left) [rev/s] ramped at ``ramp`` [rev/s^2] and held over each substep.
+    out_pos (substeps + 1, N, 2): positions at the period's start and after each substep
+    (of the watched robots at least).
     """
     for i in prange(len(pose)):
         x, y, th = pose[i, 0], pose[i, 1], pose[i, 2]
-        v, u = cmd[i, 0], cmd[i, 1]
         out_pos[0, i, 0], out_pos[0, i, 1] = x, y
         if ideal:
+            v, u = cmd[0, i, 0], cmd[0, i, 1]
             for s in range(1 if watched[i] else substeps, substeps + 1):
                 h = s * dt
                 px, py, pth = arc_step(x, y, th, v * h, u * h)
                 out_pos[s, i, 0], out_pos[s, i, 1] = px, py
             pose[i, 0], pose[i, 1], pose[i, 2] = px, py, pth
         else:
-            target_r, target_l = wheel_command(v, u, wheel_radius, wheel_base, speed_limit)
             step = ramp * dt
             wr, wl = wheels[i, 0], wheels[i, 1]
             for s in range(1, substeps + 1):
+                target_r, target_l = wheel_command(cmd[s - 1, i, 0], cmd[s - 1, i, 1],
+                                                   wheel_radius, wheel_base, speed_limit)
                 wr += min(max(target_r - wr, -step), step)
                 wl += min(max(target_l - wl, -step), step)
                 bv, bu = body_velocity(TWO_PI * wr, TWO_PI * wl, wheel_radius, wheel_base)

@@ -156,3 +156,19 @@ def test_cluttered_fields_never_collide(seed):
     assert m["collisions"] == 0 and m["min_pair_distance"] > 1.0
     assert m["min_obstacle_clearance"] > 1.0
     assert len(m["stuck_robots"]) <= n // 4             # most converge
+
+
+@pytest.mark.parametrize("latency, still_periods", [(0.0, 0), (0.1, 5), (0.03, 1)])
+def test_drive_latency_delays_the_wheels(latency, still_periods):
+    """With the wheel plant a command reaches the wheels a drive latency after it was
+    issued (in whole physics substeps: 0.03 s is 6 substeps of 5 ms, the first command moves
+    the robot from the second period on); with the ideal plant there is none."""
+    robot = RobotParams(drive_latency=latency)
+    form = Formation(np.zeros((1, 2)), (30.0, 0.0))
+    res = simulate(np.array([1]), np.zeros((1, 3)), form, Obstacles.empty(), ControlParams(),
+                   robot, SimOptions(duration=0.2, plant=PlantKind.WHEELS))
+    x = res.pose[:, 0, 0]
+    assert np.all(x[:still_periods + 1] == 0.0) and x[still_periods + 1] > 0.0
+    ideal = simulate(np.array([1]), np.zeros((1, 3)), form, Obstacles.empty(), ControlParams(),
+                     robot, SimOptions(duration=0.2))
+    assert ideal.pose[1, 0, 0] > 0.0

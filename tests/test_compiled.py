@@ -38,7 +38,7 @@ def test_paper_example_compiled_equals_interpreted():
 
 def test_crowded_swarm_with_wheels_compiled_equals_interpreted():
     """Robots crowded onto obstacles (AVOID, ROTATE, corner takeovers, collisions counted),
-    through the wheel plant, in a rotating formation."""
+    through the wheel plant with a drive latency, in a rotating formation."""
     rng = np.random.default_rng(3)
     n = 40
     poses = np.column_stack([rng.uniform(-20, 0, n), rng.uniform(-10, 10, n),
@@ -46,7 +46,8 @@ def test_crowded_swarm_with_wheels_compiled_equals_interpreted():
     form = Formation(formation_offsets(FormationKind.CIRCLE, n, 2.5), (15.0, 0.0),
                      (1.0, 0.5), omega=0.2)
     obstacles = Obstacles(rng.uniform([-5, -10], [12, 10], (8, 2)), rng.uniform(0.5, 2.5, 8))
-    a, b = both(np.arange(n), poses, form, obstacles, robot=RobotParams(wheel_ramp=5.0),
+    a, b = both(np.arange(n), poses, form, obstacles,
+                robot=RobotParams(wheel_ramp=5.0, drive_latency=0.05),
                 duration=4.0, plant=PlantKind.WHEELS)
     assert_equal_runs(a, b)
     assert a.metrics.summary("x", 1.0)["mode_switches"] > 0

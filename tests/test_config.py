@@ -60,8 +60,10 @@ def test_braking_margin_matches_the_specification():
     assert not slow_ramp.ok               # docs/controller.md: 200 rev/s^2 already breaks it
     with pytest.raises(ConfigError, match="braking margin"):
         check_braking_margin(ControlParams(), RobotParams(wheel_ramp=200.0), strict=True)
-    # stale neighbour data eats the margin too
+    # stale neighbour data eats the margin too, and so does the drive latency
     assert not braking_margin(ControlParams(), RobotParams(), data_age=0.05).ok
+    late = braking_margin(ControlParams(), RobotParams(drive_latency=0.05))
+    assert late.reaction == pytest.approx(12.0 * (0.02 + 0.05)) and not late.ok
 
 
 def test_braking_margin_warns_when_not_strict(caplog):

@@ -205,3 +205,16 @@ def test_cyclic_estimates_and_answers_carry_the_axis_state(rig):
     assert got and struct.unpack("<ff", got[-1].data) == pytest.approx((axis.pos, axis.vel))
     assert got[-1].data == encode(1, Cmd.GET_ENCODER_ESTIMATES, Pos_Estimate=axis.pos,
                                   Vel_Estimate=axis.vel).data
+
+
+def test_drive_latency_delays_velocity_commands(rig):
+    """A robot profile's drive latency: the emulated drivers apply a velocity command that
+    long after it arrived (the setpoint is unchanged until then)."""
+    rig.drivers.latency = 0.05
+    rig.host.arm()
+    rig.run(0.05, command=(0.0, 0.0))
+    rig.host.command(4.0, 4.0)
+    rig.run(0.045)                                     # less than the latency
+    assert [a.setpoint for a in rig.drivers.axes.values()] == [0.0, 0.0]
+    rig.run(0.01)
+    assert [a.setpoint for a in rig.drivers.axes.values()] == [4.0, 4.0]

@@ -20,7 +20,7 @@ def test_odometry_from_encoders_matches_the_plant_truth():
     for k in range(2000):
         if k % 200 == 0:
             v, u = rng.uniform(-8, 8), rng.uniform(-4, 4)
-        advance(truth, np.array([[v, u, 0.0]]), wheels, False, robot.wheel_radius,
+        advance(truth, np.array([[[v, u]]]), wheels, False, robot.wheel_radius,
                 robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1,
                 np.ones(1, bool),
                 np.zeros((2, 1, 2)))

@@ -128,7 +128,7 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
     dt = 0.005
     for k in range(20):
         plant.step(dt, dt * k, 100.0 + dt * k)
-        advance(pose, np.array([[v_cmd, u_cmd, 0.0]]), wheels, False, robot.wheel_radius,
+        advance(pose, np.array([[[v_cmd, u_cmd]]]), wheels, False, robot.wheel_radius,
                 robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1,
                 np.ones(1, bool),
                 np.zeros((2, 1, 2)))

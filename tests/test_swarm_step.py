@@ -11,7 +11,7 @@ from firmware_sim.swarm_step import advance, build_grid
 
 def _advance(pose, v, u, wheels, ideal, robot, dt, substeps):
     pos = np.zeros((substeps + 1, len(pose), 2))
-    cmd = np.column_stack([v, u, np.zeros(len(pose))])
+    cmd = np.repeat(np.column_stack([v, u])[None], substeps, axis=0)   # each substep
     advance(pose, cmd, wheels, ideal, robot.wheel_radius, robot.wheel_base,
             robot.wheel_speed_limit, robot.wheel_ramp, dt, substeps,
             np.ones(len(pose), bool), pos)
