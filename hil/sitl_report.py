@@ -36,6 +36,18 @@ def _at(times: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
     return values[idx]
 
 
+def _pose_at(times: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Truth (x, y, theta) at each t: positions interpolated between the samples stamped
+    before and after t (held before the first and after the last), heading of the sample
+    at or before t. A truth sample is stamped when the robot was there, which may be well
+    before it is received (a multi-host world hears remote wheels late): holding the last
+    one would show a robot behind where it was."""
+    out = _at(times, values, t)[:, :3].copy()
+    out[:, 0] = np.interp(t, times, values[:, 0])
+    out[:, 1] = np.interp(t, times, values[:, 1])
+    return out
+
+
 def missed_in(loop_stats: dict, start: float, end: float) -> int:
     """Periods a loop skipped (its ``overrun_events``, UNIX times) between ``start`` and
     ``end`` [s]: the deadline misses of a mission, apart from start-up and shut-down. Those
@@ -76,7 +88,7 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
         st, sv = _series(states[int(rid)])
         truth_series[j] = (tt - epoch, tv)
         truth_t.append(tt - epoch)
-        pose[:, j] = _at(tt - epoch, tv, t)[:, :3]
+        pose[:, j] = _pose_at(tt - epoch, tv, t)
         s = _at(st - epoch, sv, t)
         v[:, j], u[:, j], mode[:, j] = s[:, 0], s[:, 1], s[:, 2].astype(int)
     ref = np.stack([sc.formation.reference(tk)[0] for tk in t])

@@ -267,3 +267,16 @@ def test_remote_robot_rolls_through_its_reported_wheel_turns_late_or_not():
     for k in range(42):
         plant.step(0.005, 0.005 * k, 100.0 + 0.005 * k)
     assert local.pose == pytest.approx(prompt.pose, abs=0.02)
+
+
+def test_truth_between_late_reports_is_interpolated():
+    """The SITL report's truth at a control period lies between the samples stamped before
+    and after it (a late report must not show a robot behind where it was)."""
+    from hil.sitl_report import _pose_at
+
+    times = np.array([0.0, 0.2])
+    values = np.array([[0.0, 0.0, 0.0, 2.0, 0.0], [0.4, 0.1, 0.5, 2.0, 0.0]])
+    got = _pose_at(times, values, np.array([-0.1, 0.1, 0.2, 0.3]))
+    assert got[:, 0] == pytest.approx([0.0, 0.2, 0.4, 0.4])
+    assert got[:, 1] == pytest.approx([0.0, 0.05, 0.1, 0.1])
+    assert got[:, 2] == pytest.approx([0.0, 0.0, 0.5, 0.5])
