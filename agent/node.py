@@ -71,6 +71,7 @@ class Agent:
     def __init__(self, settings: AgentSettings, motor: MotorPort, swarm: SwarmPort,
                  clock: Clock):
         self.s = settings
+        self._law_params = LawParams.of(settings.control)   # the law's view of s.control
         self.motor, self.swarm, self.clock = motor, swarm, clock
         self.mode = AgentMode.DISARMED
         self.failsafe: str | None = None
@@ -140,6 +141,7 @@ class Agent:
         try:
             control = dataclasses.replace(self.s.control, **{spec.field: float(value)})
             self.s = dataclasses.replace(self.s, control=control)
+            self._law_params = LawParams.of(control)
         except ConfigError as exc:
             return f"{name} = {value:g} refused: {exc}"
         log.info("robot %d: %s = %g", self.s.robot_id, name, self.param(name))
@@ -249,7 +251,7 @@ class Agent:
         self._last_law = now_m
         v, u, mode, self.memory = law_step(
             *pose, *self.reference, near.fresh_x, near.fresh_y, obs_x, obs_y, obs_r,
-            self.memory, LawParams.of(self.s.control), max(dt, 1e-6))
+            self.memory, self._law_params, max(dt, 1e-6))
         self.law_mode = Mode(mode)
         return v, u
 

@@ -5,7 +5,8 @@
 The machine is shared and its speed drifts over minutes, so figures of two commits are only
 comparable when measured in the same run, interleaved: this checks REV out into a temporary
 git worktree, then runs ``SCRIPT ARGS`` from each checkout in turn (each importing its own
-code: PYTHONPATH is the checkout), ``--rounds`` times, printing each output under a header.
+code: PYTHONPATH is the checkout; a script the other commit lacks is taken from this one),
+``--rounds`` times, printing each output under a header.
 The worktree is removed at the end, also on failure or Ctrl-C.
 """
 from __future__ import annotations
@@ -21,6 +22,10 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def run_in(checkout: Path, script: list[str]) -> str:
+    """Run ``script`` with ``checkout``'s code; a script the checkout does not have (a
+    benchmark newer than it) is taken from this one."""
+    if not (checkout / script[0]).exists():
+        script = [str(ROOT / script[0]), *script[1:]]
     env = dict(os.environ, PYTHONPATH=str(checkout))
     done = subprocess.run([sys.executable, *script], cwd=checkout, env=env,
                           capture_output=True, text=True, check=False)

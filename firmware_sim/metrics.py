@@ -2,8 +2,10 @@
 
 Fed as the run goes (no full trajectory needed, so it serves 10 000-robot batch runs and
 SITL alike): :meth:`RunMetrics.observe_geometry` at every physics (sub)step,
-:meth:`RunMetrics.observe_control` at every control period. :meth:`RunMetrics.summary` gives
-the ``metrics.json`` dictionary (its keys are listed in docs/formats.md).
+:meth:`RunMetrics.observe_period` at every control period (from
+:func:`firmware_sim.swarm_step.period_summary`, which applies the tolerance below).
+:meth:`RunMetrics.summary` gives the ``metrics.json`` dictionary (its keys are listed in
+docs/formats.md).
 
 Convergence tolerance per robot: |p_d_dot| / K + 0.25 m. The law's only feed-forward is the
 heading rate in TRACK; v has none of the reference velocity, so in steady state a robot
@@ -17,11 +19,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 TOLERANCE_MARGIN = 0.25  # m, added to the steady-state lag |p_d_dot| / K
-
-
-def tolerance(ref_vel: np.ndarray, K: float) -> np.ndarray:
-    """Per-robot convergence tolerance [m] for reference velocities (N, 2) [m/s]."""
-    return np.hypot(ref_vel[..., 0], ref_vel[..., 1]) / K + TOLERANCE_MARGIN
 
 
 @dataclass
@@ -40,7 +37,6 @@ class RunMetrics:
     geometry_t: list = field(default_factory=list)
     geometry_dmin: list = field(default_factory=list)
     geometry_clear: list = field(default_factory=list)
-    _last_mode: np.ndarray | None = None
     _last_bad_t: float | None = None
     _seen_t: list = field(default_factory=list)
     _final_err: np.ndarray | None = None
@@ -75,17 +71,6 @@ class RunMetrics:
         self.geometry_t.append(t)
         self.geometry_dmin.append(dmin)
         self.geometry_clear.append(cmin)
-
-    def observe_control(self, t: float, error: np.ndarray, tol: np.ndarray, v: np.ndarray,
-                        u: np.ndarray, mode: np.ndarray) -> None:
-        """Tracking error norms (N,) [m] against tolerances (N,), commands and modes at t."""
-        switches = (0 if self._last_mode is None
-                    else int(np.count_nonzero(mode != self._last_mode)))
-        self._last_mode = mode.copy()
-        within = error <= tol
-        self.observe_period(t, float(np.abs(v).max(initial=0.0)),
-                            float(np.abs(u).max(initial=0.0)), switches, error, within,
-                            bool(within.all()))
 
     def observe_period(self, t: float, max_abs_v: float, max_abs_u: float, switches: int,
                        error: np.ndarray, within: np.ndarray, all_within: bool) -> None:

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_sim.metrics import RunMetrics, tolerance
+from firmware_sim.metrics import TOLERANCE_MARGIN, RunMetrics
+from firmware_sim.swarm_step import period_summary
 from firmware_sim.world import Obstacles
 from hil.recorder import read_messages
 from hil.run_folder import RunData, finite_or_nan
@@ -105,10 +106,14 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
     for ts in samples:
         pos = np.stack([_at(*truth_series[j], np.array([ts]))[0, :2] for j in range(n)])
         metrics.observe_geometry(float(ts), pos, pairs, robots, obstacles.clearance(pos))
+    last_mode = np.zeros(n)
     for k, tk in enumerate(t):
-        err = np.hypot(*(pose[k, :, :2] - ref[k]).T)
-        metrics.observe_control(float(tk), err, tolerance(ref_vel[k], sc.control.K), v[k],
-                                u[k], mode[k])
+        cmd = np.column_stack([v[k], u[k], mode[k]]).astype(float)
+        err, within = np.zeros(n), np.zeros(n, bool)
+        max_v, max_u, switches, all_within = period_summary(
+            pose[k], cmd, np.column_stack([ref[k], ref_vel[k]]), sc.control.K,
+            TOLERANCE_MARGIN, k == 0, last_mode, err, within)
+        metrics.observe_period(float(tk), max_v, max_u, switches, err, within, all_within)
     data = RunData(ids=sc.ids, t=t, pose=pose, v=v, u=u, mode=mode, ref=ref,
                    dist_t=np.asarray(metrics.geometry_t),
                    d_min=finite_or_nan(metrics.geometry_dmin),

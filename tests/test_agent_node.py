@@ -203,6 +203,7 @@ def test_runtime_parameters_change_through_set_param_only_when_valid():
     assert agent.param("BS_K_THETA") == 3.0
     assert agent.set_param("BS_K_THETA", 2.5) is None
     assert agent.s.control.K_theta == agent.param("BS_K_THETA") == 2.5
+    assert agent._law_params.K_theta == 2.5                 # the law runs the new gain
     assert agent.s.robot == before.robot and agent.s.timeouts == before.timeouts
     settled = agent.s
     for name, value, why in [("BS_K", -1.0, "BS_K = -1 refused: ControlParams.K: must be > 0"),

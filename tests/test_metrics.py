@@ -1,17 +1,24 @@
 import numpy as np
 import pytest
 
-from firmware_sim.metrics import RunMetrics, tolerance
+from firmware_sim.metrics import TOLERANCE_MARGIN, RunMetrics
+from firmware_sim.swarm_step import period_summary
 
 
 def test_tolerance_is_lag_plus_margin():
-    assert tolerance(np.array([[2.0, 0.0]]), 4.0)[0] == pytest.approx(0.75)
+    """A robot 0.75 m behind a reference moving at 2 m/s (K = 4) is within, 0.76 m is not."""
+    pose = np.array([[-0.75, 0.0, 0.0], [-0.76, 0.0, 0.0]])
+    ref = np.array([[0.0, 0.0, 2.0, 0.0], [0.0, 0.0, 2.0, 0.0]])
+    err, within = np.zeros(2), np.zeros(2, bool)
+    period_summary(pose, np.zeros((2, 3)), ref, 4.0, TOLERANCE_MARGIN, True, np.zeros(2), err,
+                   within)
+    assert err == pytest.approx([0.75, 0.76]) and within.tolist() == [True, False]
 
 
 def _control(m, t, err):
-    n = len(err)
-    m.observe_control(t, np.array(err), np.full(n, 1.0), np.zeros(n), np.zeros(n),
-                      np.zeros(n, np.int8))
+    err = np.array(err, dtype=float)
+    within = err <= 1.0
+    m.observe_period(t, 0.0, 0.0, 0, err, within, bool(within.all()))
 
 
 def test_convergence_time_is_after_the_last_excursion():
@@ -47,7 +54,10 @@ def test_collisions_count_pairs_and_robots_inside_obstacles():
 
 def test_mode_switches_are_counted():
     m = RunMetrics(ids=np.array([1, 2]), a=1.0)
-    for modes in ([0, 0], [1, 0], [1, 2], [0, 0]):
-        m.observe_control(0.0, np.zeros(2), np.ones(2), np.zeros(2), np.zeros(2),
-                          np.array(modes, np.int8))
+    last_mode, err, within = np.zeros(2), np.zeros(2), np.zeros(2, bool)
+    for k, modes in enumerate(([0, 0], [1, 0], [1, 2], [0, 0])):
+        cmd = np.column_stack([np.zeros(2), np.zeros(2), modes]).astype(float)
+        summary = period_summary(np.zeros((2, 3)), cmd, np.zeros((2, 4)), 4.0,
+                                 TOLERANCE_MARGIN, k == 0, last_mode, err, within)
+        m.observe_period(0.0, summary[0], summary[1], summary[2], err, within, summary[3])
     assert m.summary("x", 1.0)["mode_switches"] == 4
