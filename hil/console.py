@@ -1,11 +1,20 @@
 """Terminal output of the CLI: a progress bar for long runs and the summary table."""
 from __future__ import annotations
 
+import contextlib
 import time
-from typing import Callable
+from typing import Callable, Iterator
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeRemainingColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 from rich.table import Table
 
 
@@ -43,6 +52,26 @@ class LazyProgress:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@contextlib.contextmanager
+def count_progress(console: Console, label: str, total: int
+                   ) -> Iterator[Callable[[bool], None]]:
+    """A bar over ``total`` items: done/total, failures, elapsed time and ETA. Yields
+    ``advance(failed)``, to call once per finished item."""
+    bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                   TextColumn("{task.fields[failed]}"), TimeElapsedColumn(),
+                   TextColumn("ETA"), TimeRemainingColumn(), console=console)
+    task = bar.add_task(label, total=total, failed="")
+    failures = 0
+
+    def advance(failed: bool) -> None:
+        nonlocal failures
+        failures += failed
+        bar.update(task, advance=1, failed=f"{failures} failed" if failures else "")
+
+    with bar:
+        yield advance
 
 
 def _fmt(value) -> str:

@@ -1,0 +1,432 @@
+"""boundswarm campaign: spec expansion and keys, resume, Dask clusters (local and separate
+processes), the report and the replay of a run."""
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import re
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+
+from hil.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+SMOKE = ROOT / "campaigns" / "smoke.toml"
+REALISTIC = ROOT / "campaigns" / "realistic.toml"
+STANDIN = Path(__file__).resolve().parent / "families_standin.py"
+WORLD = "world" in __import__("hil.scenario", fromlist=["TOP_KEYS"]).TOP_KEYS
+
+TINY = """
+name = "tiny"
+duration = 6.0
+seeds = 2
+profiles = ["{root}/robots/cart.toml", "none"]
+[[family]]
+kind = ["line", "grid"]
+robots = 5
+field = "sparse"
+[[family]]
+micro = ["head_on_swap"]
+"""
+
+
+# --- scenario families: hil.families, or the stand-in until it lands ----------------------
+@pytest.fixture(scope="module")
+def families(tmp_path_factory):
+    """hil.families for this process and for every process it starts (Dask workers): the
+    real module when it exists, else tests/families_standin.py (installed in subprocesses
+    by a sitecustomize on PYTHONPATH). Yields the environment for subprocesses."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    if importlib.util.find_spec("hil.families") is not None:
+        yield env
+        return
+    site = tmp_path_factory.mktemp("standin")
+    (site / "sitecustomize.py").write_text(
+        "import importlib.util, sys\n"
+        f"spec = importlib.util.spec_from_file_location('hil.families', {str(STANDIN)!r})\n"
+        "module = importlib.util.module_from_spec(spec)\n"
+        "sys.modules['hil.families'] = module\n"
+        "spec.loader.exec_module(module)\n")
+    env["PYTHONPATH"] = os.pathsep.join([str(site), env["PYTHONPATH"]])
+    spec = importlib.util.spec_from_file_location("hil.families", STANDIN)
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    saved = os.environ.get("PYTHONPATH")
+    sys.modules["hil.families"] = module
+    os.environ["PYTHONPATH"] = env["PYTHONPATH"]
+    try:
+        yield env
+    finally:
+        del sys.modules["hil.families"]
+        if saved is None:
+            os.environ.pop("PYTHONPATH", None)
+        else:
+            os.environ["PYTHONPATH"] = saved
+
+
+def write_spec(folder: Path, text: str, name: str = "spec.toml") -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / name
+    path.write_text(text.format(root=ROOT))
+    return path
+
+
+def children() -> list[psutil.Process]:
+    """This process's children but multiprocessing's resource tracker (it lives as long as
+    this process, whatever started it)."""
+    return [c for c in psutil.Process().children(recursive=True)
+            if "multiprocessing.resource_tracker" not in " ".join(c.cmdline())]
+
+
+def stop(procs: list[subprocess.Popen]) -> None:
+    """End the processes this test started, and their children, by PID."""
+    family = []
+    for p in procs:
+        try:
+            family += psutil.Process(p.pid).children(recursive=True)
+        except psutil.NoSuchProcess:
+            pass
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    for p in procs:
+        try:
+            p.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+    for c in family:
+        try:
+            c.kill()
+        except psutil.NoSuchProcess:
+            pass
+
+
+# --- the spec -------------------------------------------------------------------------------
+CROSSED = """
+name = "crossed"
+seeds = [10, 3]
+profiles = ["{root}/robots/cart.toml", "{root}/robots/fast.toml"]
+[[family]]
+kind = ["line", "grid"]
+robots = [5, 8]
+[[family]]
+micro = ["head_on_swap", "narrow_gap"]
+[world]
+link_delay = [0.0, 0.2]
+loss_burst = 2
+kill_share = 0.5
+kill_at = [2.0, 4.0]
+[control]
+hysteresis = [0.0, 0.5]
+"""
+
+
+def test_a_spec_crosses_its_values_into_runs_with_stable_keys(tmp_path, families):
+    from hil.campaign_spec import load_spec, run_key
+    spec = load_spec(write_spec(tmp_path, CROSSED))
+    # (2 kinds x 2 sizes + 2 micro cases) x 3 seeds x 2 profiles x 2 delays x 2 hysteresis
+    assert len(spec.runs) == 6 * 3 * 2 * 2 * 2 == 144
+    assert len({r.key for r in spec.runs}) == 144
+    assert all(re.fullmatch(r"[0-9a-f]{12}", r.key) for r in spec.runs)
+    assert {r.description["seed"] for r in spec.runs} == {10, 11, 12}
+    assert {r.description["profile"] for r in spec.runs} == {"cart", "fast"}
+    # the hash of the canonical JSON (pinned: keys are results' names in a folder)
+    assert run_key({"seed": 1, "a": [1.0, "x"]}) == run_key({"a": [1.0, "x"], "seed": 1})
+    assert run_key({"seed": 1}) == "fbe47f6d82b4"
+    # parsed again: the same runs in the same order; an integer where a float is meant
+    # (loss_burst = 2) does not change a key
+    again = load_spec(write_spec(tmp_path, CROSSED.replace("loss_burst = 2",
+                                                           "loss_burst = 2.0"), "b.toml"))
+    assert [r.key for r in again.runs] == [r.key for r in spec.runs]
+    # more seeds and another kind add runs and keep the keys of the others
+    more = load_spec(write_spec(tmp_path, CROSSED.replace("[10, 3]", "[10, 4]").replace(
+        '["line", "grid"]', '["line", "wedge", "grid"]'), "c.toml"))
+    assert {r.key for r in spec.runs} < {r.key for r in more.runs}
+    assert len(more.runs) == (3 * 2 + 2) * 4 * 2 * 2 * 2
+
+
+def test_world_seed_and_kill_depend_on_the_seed_and_family_only(tmp_path, families):
+    from hil.campaign_run import scenario_doc
+    from hil.campaign_spec import load_spec
+    spec = load_spec(write_spec(tmp_path, CROSSED))
+    by_case: dict[str, set] = {}
+    for r in spec.runs:
+        d = r.description
+        case = json.dumps([d.get("family"), d.get("micro"), d["seed"]], sort_keys=True)
+        by_case.setdefault(case, set()).add(
+            json.dumps([d["world"]["seed"], d.get("kill_at")]))
+    # paired: every profile, delay and gain of one scenario has one world seed and kill
+    assert len(by_case) == 18 and all(len(v) == 1 for v in by_case.values())
+    killed = [json.loads(next(iter(v)))[1] is not None for v in by_case.values()]
+    assert 0 < sum(killed) < len(killed)            # kill_share = 0.5 of 18 scenarios
+    run = next(r for r in spec.runs if r.description.get("kill_at"))
+    doc = scenario_doc(run.description)
+    assert doc == scenario_doc(run.description)     # a pure function of the description
+    kill = doc["world"]["kill"]
+    assert len(kill) == 1 and kill[0]["robot"] in [r["id"] for r in doc["robots"]]
+    assert 2.0 <= kill[0]["at"] <= 4.0
+    assert doc["world"]["link_delay"] in (0.0, 0.2) and doc["world"]["loss_burst"] == 2.0
+    assert doc["sim"]["plant"] == "wheels" and doc["robot"]["wheel_speed_limit"] > 0
+    assert doc["control"]["hysteresis"] == run.description["control"]["hysteresis"]
+
+
+@pytest.mark.parametrize("change, field", [
+    (("name = \"crossed\"", "name = \"crossed\"\nrepeat = 2"), "top level: unknown field"),
+    (("robots = [5, 8]", "robots = [5, 8]\nsize = 3"), "family[0]: unknown field"),
+    (("kind = [\"line\", \"grid\"]", "kind = [\"line\", \"hexagon\"]"), "family[0]"),
+    (("robots = [5, 8]", "robots = [5, 8.5]"), "family[0].robots"),
+    (("\"narrow_gap\"]", "\"narrow_gap\", \"nope\"]"), "family[1].micro"),
+    (("seeds = [10, 3]", "seeds = 0"), "seeds"),
+    (("seeds = [10, 3]", "seeds = [1, 2, 3]"), "seeds"),
+    (("hysteresis = [0.0, 0.5]", "hysteresis = [0.0, -1.0]"), "[control]"),
+    (("hysteresis = [0.0, 0.5]", "gain = 2.0"), "[control]: unknown field"),
+    (("link_delay = [0.0, 0.2]", "link_loss = [0.0, 1.5]"), "[world] link_loss"),
+    (("link_delay = [0.0, 0.2]", "link_delay = []"), "[world] link_delay"),
+    (("kill_at = [2.0, 4.0]", ""), "[world] kill_at"),
+    (("kill_at = [2.0, 4.0]", "kill_at = [4.0, 2.0]"), "[world] kill_at"),
+    (("fast.toml\"]", "nowhere.toml\"]"), "profiles[1]"),
+])
+def test_a_wrong_field_is_refused_naming_the_file_and_the_field(tmp_path, families, change,
+                                                                field):
+    from hil.campaign_spec import load_spec
+    from hil.scenario import ScenarioError
+    old, new = change
+    assert old in CROSSED
+    path = write_spec(tmp_path, CROSSED.replace(old, new))
+    with pytest.raises(ScenarioError) as err:
+        load_spec(path)
+    assert str(err.value).startswith(str(path)) and field in str(err.value)
+
+
+def test_a_bad_spec_exits_2_and_names_the_field(tmp_path, families, capsys):
+    path = write_spec(tmp_path, CROSSED.replace("seeds = [10, 3]", "seeds = -1"))
+    assert main(["campaign", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "seeds" in err
+    assert not (tmp_path / "out").exists()
+
+
+# --- rows and tables ------------------------------------------------------------------------
+def test_a_run_that_raises_is_a_failed_row(families, monkeypatch):
+    from hil.campaign_run import run_one
+    desc = {"family": {"kind": "line", "robots": 5}, "seed": 0, "duration": 5.0,
+            "profile": "none", "robot": None, "control": {}}
+
+    def broken(*args, **kwargs):
+        raise ValueError("no room\nfor the robots")
+    monkeypatch.setattr(sys.modules["hil.families"], "family_doc", broken)
+    row = run_one(desc)
+    assert row["status"] == "failed" and row["error"] == "ValueError: no room for the robots"
+    assert row["family_kind"] == "line" and row["seed"] == 0 and "converged" not in row
+
+
+def test_rows_become_typed_arrow_columns():
+    from hil.campaign import arrow_table
+    rows = [{"key": "a", "n": 1, "x": 1, "ok": True, "pairs": [[1, 2]], "t": None},
+            {"key": "b", "n": 2, "x": 2.5, "ok": None, "pairs": [], "t": None, "new": "s"}]
+    table = arrow_table(rows)
+    types = {f.name: str(f.type) for f in table.schema}
+    assert types == {"key": "string", "n": "int64", "x": "double", "ok": "bool",
+                     "pairs": "string", "t": "null", "new": "string"}
+    assert table.column("pairs").to_pylist() == ["[[1, 2]]", "[]"]
+    assert table.column("new").to_pylist() == [None, "s"]
+
+
+def test_wilson_interval():
+    from hil.campaign_report import wilson
+    lo, hi = wilson(0, 10)
+    assert lo == 0.0 and hi == pytest.approx(0.2775, abs=1e-4)
+    lo, hi = wilson(5, 10)
+    assert (lo, hi) == (pytest.approx(0.2366, abs=1e-4), pytest.approx(0.7634, abs=1e-4))
+    assert wilson(0, 0) == (0.0, 1.0)
+
+
+# --- running --------------------------------------------------------------------------------
+def rows_of(folder: Path) -> list[dict]:
+    return [json.loads(line) for line in (folder / "runs.jsonl").read_text().splitlines()]
+
+
+def timings_of(folder: Path) -> list[str]:
+    return [json.loads(line)["key"] for line in
+            (folder / "timings.jsonl").read_text().splitlines()]
+
+
+def test_ctrl_c_stops_the_cluster_and_a_rerun_resumes_without_rerunning(tmp_path, families):
+    """Interrupted (SIGINT) mid-way: exit 130 and no process left; a rerun runs only the
+    runs without a row, and a campaign whose rows were partly deleted reruns exactly those
+    and writes the same runs.parquet."""
+    spec = write_spec(tmp_path, TINY.replace("seeds = 2", "seeds = 4"))
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "hil.cli", "campaign", str(spec), "--out", str(out),
+           "--workers", "1"]
+    proc = subprocess.Popen(cmd, env=families, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / "runs.jsonl").exists() and len(rows_of(out)) >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()[0]
+        started = psutil.Process(proc.pid).children(recursive=True)
+        assert started, "the local cluster's worker processes"
+        proc.send_signal(signal.SIGINT)
+        output, _ = proc.communicate(timeout=60)
+        assert proc.returncode == 130, output
+        assert "interrupted" in output
+        time.sleep(0.5)
+        assert not [p.pid for p in started if p.is_running()
+                    and p.status() != psutil.STATUS_ZOMBIE]
+    finally:
+        stop([proc])
+    before = rows_of(out)
+    assert 2 <= len(before) < 24 and not (out / "runs.parquet").exists()
+
+    assert main(["campaign", str(spec), "--out", str(out), "--workers", "1"]) == 0
+    done = timings_of(out)
+    assert len(done) == len(set(done)) == 24               # no finished run ran twice
+    assert {r["key"] for r in before} <= set(done[:len(before)])
+    parquet = (out / "runs.parquet").read_bytes()
+    assert not children()
+
+    lines = (out / "runs.jsonl").read_text().splitlines()
+    kept = lines[::3]
+    (out / "runs.jsonl").write_text("\n".join(kept) + "\n" + lines[1][:40])   # torn tail
+    assert main(["campaign", str(out), "--workers", "1"]) == 0           # the folder alone
+    assert len(timings_of(out)) == 24 + 24 - len(kept)
+    assert (out / "runs.parquet").read_bytes() == parquet
+    assert not children()
+
+    assert main(["campaign", str(out)]) == 0                       # nothing left to run
+    assert len(timings_of(out)) == 24 + 24 - len(kept)
+    sessions = [json.loads(s) for s in (out / "sessions.jsonl").read_text().splitlines()]
+    assert [s["executed"] for s in sessions][-2:] == [24 - len(kept), 0]
+
+
+def test_an_unreachable_scheduler_exits_1_and_a_malformed_one_2(tmp_path, families, capsys,
+                                                                monkeypatch):
+    from helpers import free_port
+
+    from hil import campaign
+    monkeypatch.setattr(campaign, "CONNECT_TIMEOUT", 1.0)
+    spec = write_spec(tmp_path, TINY)
+    address = f"tcp://127.0.0.1:{free_port()}"
+    assert main(["campaign", str(spec), "--out", str(tmp_path / "o"),
+                 "--scheduler", address]) == 1
+    err = capsys.readouterr().err
+    assert f"cannot reach the Dask scheduler at {address}" in err and "\n" == err[-1]
+    assert main(["campaign", str(spec), "--out", str(tmp_path / "o"),
+                 "--scheduler", "127.0.0.1"]) == 2
+    assert "--scheduler" in capsys.readouterr().err
+
+
+# --- the smoke campaign: local cluster, separate processes, report, replay -----------------
+@pytest.fixture(scope="module")
+def smoke_local(tmp_path_factory, families):
+    """campaigns/smoke.toml on a local cluster of 2 workers."""
+    if not WORLD:
+        pytest.skip("the smoke campaign has world settings: needs [world] in scenarios")
+    out = tmp_path_factory.mktemp("smoke") / "local"
+    started = time.monotonic()
+    code = main(["campaign", str(SMOKE), "--out", str(out), "--workers", "2"])
+    print(f"smoke, 2 local workers: {time.monotonic() - started:.1f} s")
+    assert code == 0
+    assert not children()
+    return out
+
+
+def test_smoke_on_separate_scheduler_and_workers_equals_the_local_run(tmp_path, families,
+                                                                      smoke_local):
+    """The acceptance test: a Dask scheduler and two workers, each its own process on
+    127.0.0.1, run campaigns/smoke.toml through --scheduler; runs.parquet is byte-equal to
+    the local cluster's."""
+    from distributed import Client
+    scheduler_file = tmp_path / "scheduler.json"
+    py = sys.executable
+    local = ["--host", "127.0.0.1", "--no-dashboard", "--dashboard-address", "127.0.0.1:0"]
+    procs = [subprocess.Popen([py, "-m", "distributed.cli.dask_scheduler", "--port", "0",
+                               "--scheduler-file", str(scheduler_file), *local],
+                              env=families, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        for _ in range(2):
+            procs.append(subprocess.Popen(
+                [py, "-m", "distributed.cli.dask_worker", "--scheduler-file",
+                 str(scheduler_file), "--nworkers", "1", "--nthreads", "1", *local],
+                env=families, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        with Client(address, timeout=30, set_as_default=False) as client:
+            client.wait_for_workers(2, timeout=60)
+        # nothing of the cluster listens beyond this machine
+        for p in procs:
+            for proc in [psutil.Process(p.pid), *psutil.Process(p.pid).children(True)]:
+                for conn in proc.net_connections(kind="inet"):
+                    if conn.status == psutil.CONN_LISTEN:
+                        assert conn.laddr.ip == "127.0.0.1", (proc.cmdline(), conn)
+        out = tmp_path / "remote"
+        assert main(["campaign", str(SMOKE), "--out", str(out), "--scheduler", address]) == 0
+    finally:
+        stop(procs)
+    assert (out / "runs.parquet").read_bytes() == (smoke_local / "runs.parquet").read_bytes()
+    assert len({json.loads(t)["pid"] for t in
+                (out / "timings.jsonl").read_text().splitlines()}) == 2   # both workers ran
+
+
+def test_smoke_report_has_groups_and_intervals_and_its_replay_writes_a_run_folder(
+        tmp_path, smoke_local, capsys):
+    import pyarrow.parquet as pq
+    table = pq.read_table(smoke_local / "runs.parquet")
+    keys = table.column("key").to_pylist()
+    assert keys == sorted(keys) and len(keys) == len(set(keys))
+    for column in ("family_kind", "micro", "seed", "profile", "world_link_delay", "kill",
+                   "kill_robot", "safe", "converged", "deadlock", "min_pair_distance",
+                   "min_obstacle_clearance", "convergence_time", "stuck_robots"):
+        assert column in table.column_names, column
+    assert "seconds" not in table.column_names
+    report = (smoke_local / "report.md").read_text()
+    for group in ("## Overall", "## By family_kind", "## By micro", "## By profile",
+                  "## By world_link_delay", "## By kill", "## Worst runs"):
+        assert group in report, group
+    assert re.search(r"\| all \| \d+ \| 0 \| \d+\.\d % \[\d+\.\d, \d+\.\d\] \|", report)
+    figures = {p.name for p in (smoke_local / "figures").iterdir()}
+    assert {"rates_family_kind.png", "rates_profile.png", "min_distance.png",
+            "min_clearance.png"} <= figures
+    command = re.search(r"`(boundswarm campaign \S+ --replay \w+ --out \S+)`", report)[1]
+    argv = shlex.split(command)[1:]
+    key = argv[argv.index("--replay") + 1]
+    argv[argv.index("--out") + 1] = str(tmp_path / "replay")
+    main(argv)
+    run = tmp_path / "replay"
+    metrics = json.loads((run / "metrics.json").read_text())
+    row = next(r for r in rows_of(smoke_local) if r["key"] == key)
+    assert metrics["min_pair_distance"] == row["min_pair_distance"]
+    assert metrics["converged"] == row["converged"]
+    assert "reproduces the campaign's row" in capsys.readouterr().out
+    assert {p.name for p in (run / "figures").iterdir()} >= {"xy.png", "dmin.png"}
+    assert (run / "trajectories.csv").exists() and (run / "scenario.toml").exists()
+    # the run folder's scenario is the whole run: sim reproduces it from the file alone
+    assert main(["report", str(run)]) == 0
+
+
+def test_the_realistic_campaign_has_over_a_thousand_runs(families):
+    from hil.campaign_spec import load_spec
+    spec = load_spec(REALISTIC)
+    assert len(spec.runs) >= 1000
+    profiles = {r.description["profile"] for r in spec.runs}
+    assert profiles == {"cart", "fast"}
+    killed = sum(bool(r.description.get("kill_at")) for r in spec.runs) / len(spec.runs)
+    assert 0.25 < killed < 0.42
