@@ -48,6 +48,19 @@ class InRange:
     ages: list[float] = field(default_factory=list)  # s, now - stamp of each fresh one
 
 
+def extrapolate(x: float, y: float, theta: float, v: float, u: float, age: float,
+                staleness: float) -> tuple[float, float, bool]:
+    """(x, y, stale): where a neighbour reported at (x, y, theta) [m, m, rad] moving at
+    (v [m/s], u [rad/s]) ``age`` [s] ago is now, moved along its arc; at its reported
+    position and stale when older than ``staleness`` [s]. A negative age (clock skew) is 0.
+    Plain floats: the batch simulator compiles this very function."""
+    if age > staleness:
+        return x, y, True
+    dt = max(age, 0.0)
+    px, py, _ = arc_step(x, y, theta, v * dt, u * dt)
+    return px, py, False
+
+
 def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
              staleness: float, reach: float) -> InRange:
     """The neighbours within ``reach`` [m] of (x, y) at time ``now`` [s].
@@ -59,12 +72,7 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
     out = InRange()
     for m in states:
         age = now - m.stamp
-        stale = age > staleness
-        if stale:
-            px, py = m.x, m.y
-        else:
-            dt = max(age, 0.0)
-            px, py, _ = arc_step(m.x, m.y, m.theta, m.v * dt, m.u * dt)
+        px, py, stale = extrapolate(m.x, m.y, m.theta, m.v, m.u, age, staleness)
         if math.hypot(px - x, py - y) <= reach:
             if stale:
                 out.stale_x.append(px)

@@ -14,6 +14,15 @@ from agent.kinematics import arc_step
 Pose = tuple[float, float, float]
 
 
+def odometry_step(x: float, y: float, theta: float, d_right_rev: float, d_left_rev: float,
+                  wheel_radius: float, wheel_base: float) -> Pose:
+    """The pose [m, m, rad] after the wheels turned by (d_right_rev, d_left_rev) [rev] along
+    one arc. Plain floats: the batch simulator compiles this very function."""
+    d_right = 2.0 * math.pi * wheel_radius * d_right_rev
+    d_left = 2.0 * math.pi * wheel_radius * d_left_rev
+    return arc_step(x, y, theta, 0.5 * (d_right + d_left), (d_right - d_left) / wheel_base)
+
+
 @dataclass
 class Odometry:
     """Pose estimate (x, y, theta) [m, m, rad] of one robot from its wheel encoders."""
@@ -30,10 +39,8 @@ class Odometry:
     def update(self, pos_right_rev: float, pos_left_rev: float) -> Pose:
         """Advance with new encoder positions [rev]; the first call only sets the origin."""
         if self._last is not None:
-            d_right = 2.0 * math.pi * self.wheel_radius * (pos_right_rev - self._last[0])
-            d_left = 2.0 * math.pi * self.wheel_radius * (pos_left_rev - self._last[1])
-            dist = 0.5 * (d_right + d_left)
-            dtheta = (d_right - d_left) / self.wheel_base
-            self.pose = arc_step(*self.pose, dist, dtheta)
+            self.pose = odometry_step(*self.pose, pos_right_rev - self._last[0],
+                                      pos_left_rev - self._last[1], self.wheel_radius,
+                                      self.wheel_base)
         self._last = (pos_right_rev, pos_left_rev)
         return self.pose

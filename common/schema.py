@@ -15,7 +15,8 @@ that one declaration this module derives, for any section:
 
 Supported field types: ``float``, ``int``, ``bool``, ``str``, ``tuple[str, ...]``,
 ``tuple[float, float, ...]`` (fixed length), ``X | None`` of these (None: absent from the
-file), and nested sections. Errors are :class:`ConfigError`, formatted
+file), nested sections (:func:`section`) and arrays of them (:func:`tables`). Errors are
+:class:`ConfigError`, formatted
 ``<place>: <Section>.<key>: <problem>`` (the place: a file and its table).
 """
 from __future__ import annotations
@@ -65,6 +66,12 @@ def section(cls: Callable[[], Any], doc: str, key: str | None = None) -> Any:
                                                             "section": True})
 
 
+def tables(doc: str, key: str | None = None) -> Any:
+    """A field holding a tuple of sections (a TOML array of tables), by default empty; its
+    annotation is ``tuple[Section, ...]``."""
+    return dataclasses.field(default=(), metadata={"doc": doc, "key": key, "tables": True})
+
+
 @dataclass(frozen=True)
 class FieldInfo:
     """A field of a section with its resolved type."""
@@ -79,6 +86,10 @@ class FieldInfo:
     @property
     def is_section(self) -> bool:
         return bool(self.meta.get("section"))
+
+    @property
+    def is_tables(self) -> bool:
+        return bool(self.meta.get("tables"))
 
     @property
     def unit(self) -> str:
@@ -161,6 +172,10 @@ def _problem(f: FieldInfo, value: Any) -> str | None:
         return None
     if typing.get_origin(tp) is tuple:
         args = typing.get_args(tp)
+        if f.is_tables:
+            if not isinstance(value, tuple) or not all(isinstance(x, args[0]) for x in value):
+                return f"expected a list of {args[0].__name__}, got {_show(value)}"
+            return None
         if len(args) == 2 and args[1] is Ellipsis:
             if not isinstance(value, tuple) or not all(isinstance(x, str) and x
                                                        for x in value):
@@ -233,6 +248,8 @@ def from_table(cls: type[T], table: Mapping[str, Any], where: str) -> T:
     for f in infos:
         if f.is_section:
             values[f.name] = from_table(f.type, table.get(f.key, {}), _place(where, f.key))
+        elif f.is_tables and f.key in table:
+            values[f.name] = _tables_from_toml(f, table[f.key], where)
         elif f.key in table:
             value = _from_toml(f, table[f.key])
             problem = _problem(f, value)
@@ -245,6 +262,15 @@ def from_table(cls: type[T], table: Mapping[str, Any], where: str) -> T:
         return cls(**values)
     except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None
+
+
+def _tables_from_toml(f: FieldInfo, value: Any, where: str) -> tuple:
+    """An array of tables as a tuple of the sections of field ``f``."""
+    if not isinstance(value, list) or not all(isinstance(x, Mapping) for x in value):
+        raise ConfigError(f"{where}: {f.key}: expected an array of tables [[...{f.key}]], "
+                          f"got {value!r}")
+    cls = typing.get_args(f.type)[0]
+    return tuple(from_table(cls, x, f"{_place(where, f.key)}[{i}]") for i, x in enumerate(value))
 
 
 class TableReader:
@@ -350,13 +376,16 @@ def to_toml(obj: Any, table: str = "") -> str:
     """The TOML text of section ``obj`` (what :func:`from_table` reads back to an equal
     section); None values are left out, nested sections become tables."""
     lines = [f"{f.key} = {_toml_value(getattr(obj, f.name))}" for f in fields(type(obj))
-             if not f.is_section and getattr(obj, f.name) is not None]
+             if not (f.is_section or f.is_tables) and getattr(obj, f.name) is not None]
     if table and lines:
         lines.insert(0, f"[{table}]")
     text = "\n".join(lines)
     for f in fields(type(obj)):
-        if f.is_section:
-            sub = to_toml(getattr(obj, f.name), f"{table}.{f.key}" if table else f.key)
+        name = f"{table}.{f.key}" if table else f.key
+        subs = ([to_toml(getattr(obj, f.name), name)] if f.is_section else
+                [f"[[{name}]]\n" + to_toml(x) for x in getattr(obj, f.name)]
+                if f.is_tables else [])
+        for sub in subs:
             if sub:
                 text += ("\n\n" if text else "") + sub.rstrip("\n")
     return text + "\n" if text else ""
@@ -375,6 +404,8 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
     for f in fields(cls):
         if f.is_section:
             add_arguments(parser, f.type, f"{prefix}{f.key}-")
+            continue
+        if f.is_tables:          # arrays of tables have no flags: files only
             continue
         flag = "--" + (prefix + f.key).replace("_", "-")
         unit = f" [{f.unit}]" if f.unit else ""
@@ -419,6 +450,8 @@ def section_from_args(cls: type[T], args: argparse.Namespace, prefix: str = "") 
     for f in fields(cls):
         if f.is_section:
             values[f.name] = section_from_args(f.type, args, f"{prefix}{f.key}-")
+            continue
+        if f.is_tables:
             continue
         value = getattr(args, _dest(prefix, f))
         values[f.name] = tuple(value) if isinstance(value, list) else value

@@ -6,6 +6,11 @@ over ``substeps`` physics steps with distances and clearances checked at each. T
 is :mod:`firmware_sim.swarm_step`, compiled with numba together with the law when numba is
 installed (:mod:`firmware_sim.compiled`), interpreted otherwise: the same source either way.
 Time is simulated: a run is deterministic and as fast as the CPU allows.
+
+In an imperfect world (:class:`firmware_sim.world.WorldParams`) the law sees what an agent
+would (:mod:`firmware_sim.world_step`): its pose from odometry, its neighbours' states late,
+lost or stale, noisy obstacle detections; dead agents stop commanding and their drivers'
+watchdog stops their wheels. Safety and convergence are measured on the plant's truth.
 """
 from __future__ import annotations
 
@@ -20,10 +25,12 @@ import numpy as np
 from agent.config import ControlParams, RobotParams
 from agent.formation import Formation
 from agent.law import LawParams
-from firmware_sim import compiled, swarm_step
+from agent.settings import TimeoutSettings
+from common import drivers
+from firmware_sim import compiled, swarm_step, world_step
 from firmware_sim.metrics import TOLERANCE_MARGIN, RunMetrics
 from firmware_sim.plant import PlantKind
-from firmware_sim.world import Obstacles
+from firmware_sim.world import Obstacles, WorldParams
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +75,16 @@ class SimResult:
     law_seconds: float = 0.0  # wall time spent in the law (for benchmarks)
 
 
-def _engine(options: SimOptions) -> types.SimpleNamespace | types.ModuleType:
+class _Interpreted(types.SimpleNamespace):
+    """The kernels as plain Python, by name, as :func:`compiled.kernels` gives them."""
+
+
+def _interpreted() -> _Interpreted:
+    return _Interpreted(**{name: getattr(m, name) for m in (swarm_step, world_step)
+                           for name in dir(m) if callable(getattr(m, name))})
+
+
+def _engine(options: SimOptions) -> types.SimpleNamespace:
     """The compiled kernels, or the interpreted module when numba is absent or not wanted."""
     want = options.compiled
     if want is None:
@@ -79,7 +95,7 @@ def _engine(options: SimOptions) -> types.SimpleNamespace | types.ModuleType:
     elif want and not compiled.available():
         raise RuntimeError("SimOptions.compiled: numba is not installed "
                            "(pip install 'boundswarm[sim]')")
-    return compiled.kernels() if want else swarm_step
+    return compiled.kernels() if want else _interpreted()
 
 
 PARALLEL_MIN = 500   # robots; below, waking threads costs more than it saves
@@ -87,9 +103,11 @@ PARALLEL_MIN = 500   # robots; below, waking threads costs more than it saves
 
 def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacles: Obstacles,
              control: ControlParams, robot: RobotParams, options: SimOptions,
+             world: WorldParams | None = None,
              progress: Callable[[float], None] | None = None,
              clock: Callable[[], float] | None = None) -> SimResult:
-    """Run the swarm from ``poses0`` (N, 3) for ``options.duration`` seconds.
+    """Run the swarm from ``poses0`` (N, 3) for ``options.duration`` seconds in ``world``
+    (None: the ideal world).
 
     ``progress`` is called with the completed fraction about a hundred times; ``clock``
     (e.g. ``time.perf_counter``) is used, when given, to time sensing and the law for
@@ -100,8 +118,15 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     n = len(pose)
     if len(formation.offsets) != n:
         raise ValueError(f"formation has {len(formation.offsets)} places for {n} robots")
+    world = world or WorldParams()
+    ideal = options.plant is PlantKind.IDEAL
+    if world.odometry and ideal:
+        raise ValueError("the world's wheel_slip and encoder_noise need the wheels plant")
+    unknown = sorted(set(k.robot for k in world.kill) - set(ids.tolist()))
+    if unknown:
+        raise ValueError(f"world kills robots that are not in the swarm: {unknown}")
     k = _engine(options)
-    if k is not swarm_step:
+    if not isinstance(k, _Interpreted):
         compiled.use_threads(n >= PARALLEL_MIN)
     T = control.period
     steps = int(round(options.duration / T))
@@ -109,7 +134,6 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     offsets = np.ascontiguousarray(formation.offsets, dtype=float).reshape(n, 2)
     motion = np.array([*formation.center0, *formation.velocity, formation.omega], dtype=float)
     obs = np.column_stack([obstacles.centers.reshape(-1, 2), obstacles.radii]).astype(float)
-    ideal = options.plant is PlantKind.IDEAL
     metrics = RunMetrics(ids=ids, a=control.a)
     every = options.record_every
     n_rec = (steps // every + 1) if every else 0
@@ -132,20 +156,25 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     # rest before the first period
     lag = 0 if ideal else int(round(robot.drive_latency / dt))
     issued = np.zeros((S + lag, n, 2))
-    wheels = np.zeros((n, 2))
+    wheels, enc = np.zeros((n, 2)), np.zeros((n, 2))
     pos = np.zeros((S + 1, n, 2))
-    dmin, cmin = np.zeros(S + 1), np.zeros(S + 1)
+    dmin, cmin, who = np.zeros(S + 1), np.zeros(S + 1), np.zeros((S + 1, 4), np.int64)
     cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
     watch_j, watch_k = np.empty((n, watch_cap), np.int64), np.empty((n, watch_cap), np.int64)
     hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
+    w = _WorldState(world, n, ids, pose, T, control.a, k)
     for step in range(steps + 1):
         t = step * T
         t0 = clock() if clock else 0.0
+        own, seen, world_i = w.before_control(step, t, pose)
+        if own is not pose:
+            metrics.max_pose_error = max(metrics.max_pose_error, float(
+                np.hypot(own[:, 0] - pose[:, 0], own[:, 1] - pose[:, 1]).max(initial=0.0)))
         while True:
-            need, need_watch = k.control(pose, mem_f, mem_i, offsets, motion, t, obs, params, T,
-                                         options.sensing_range, control.a, reach, cap,
-                                         watch_cap, cmd, ref, new_f, new_i, near, watch_j,
-                                         watch_k)
+            need, need_watch = k.control(pose, own, seen, mem_f, mem_i, offsets, motion, t,
+                                         obs, params, T, options.sensing_range, control.a,
+                                         reach, cap, watch_cap, world_i, w.world_f, cmd, ref,
+                                         new_f, new_i, near, watch_j, watch_k)
             if need <= cap and need_watch <= watch_cap:
                 break
             cap, watch_cap = max(cap, int(need)), max(watch_cap, int(need_watch))
@@ -155,9 +184,11 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         if clock:
             law_seconds += clock() - t0
         mem_f, new_f, mem_i, new_i = new_f, mem_f, new_i, mem_i
+        w.after_control(step, t, own, cmd)
         v, u, mode = cmd[:, 0], cmd[:, 1], cmd[:, 2]       # views, overwritten next period
         max_v, max_u, switches, all_within = k.period_summary(
-            pose, cmd, ref, control.K, TOLERANCE_MARGIN, step == 0, last_mode, err, within)
+            pose, cmd, ref, control.K, TOLERANCE_MARGIN, step == 0, w.alive, last_mode, err,
+            within)
         metrics.observe_period(t, max_v, max_u, switches, err, within, all_within)
         if every and step % every == 0:
             r = step // every
@@ -175,12 +206,14 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         if last:
             pos[0] = pose[:, :2]
         else:
-            k.advance(pose, issued[len(issued) - S - lag:len(issued) - lag], wheels, ideal,
-                      robot.wheel_radius, robot.wheel_base, robot.wheel_speed_limit,
-                      robot.wheel_ramp, dt, S, watched, pos)
+            w.before_plant(step)
+            k.advance(pose, issued[len(issued) - S - lag:len(issued) - lag], wheels, w.slip,
+                      enc, ideal, robot.wheel_radius, robot.wheel_base,
+                      robot.wheel_speed_limit, robot.wheel_ramp, dt, S, watched, pos)
+            w.after_plant(step, enc, robot)
         n_sub = 1 if last else S + 1
         hits = k.geometry(pos[:n_sub], watch_j, watch_k, obs, control.a, first, pair_limit,
-                          clear_limit, watched, dmin, cmin, hit_j, hit_k)
+                          clear_limit, watched, dmin, cmin, who, hit_j, hit_k)
         pairs: list[tuple[int, int]] = []
         inside: list[int] = []
         if hits:
@@ -188,12 +221,81 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             inside = [int(ids[i]) for i in np.flatnonzero(hit_k.any(axis=1))]
             hit_j[:], hit_k[:] = False, False
         for s in range(first, n_sub):
-            metrics.observe_extremes(t + s * dt, float(dmin[s]), float(cmin[s]), pairs, inside)
+            metrics.observe_extremes(t + s * dt, float(dmin[s]), float(cmin[s]), pairs, inside,
+                                     who[s])
         if last:
             break
         if progress and step % report_every == 0:
             progress(step / steps)
     if progress:
         progress(1.0)
+    metrics.killed = sorted(k_.robot for k_ in world.kill if k_.at <= options.duration)
     return SimResult(ids=ids, t=rec_t, pose=rec_pose, v=rec_v, u=rec_u, mode=rec_mode,
                      ref=rec_ref, metrics=metrics, law_seconds=law_seconds)
+
+
+class _WorldState:
+    """The imperfect world's state through a run: what the robots know, the slip of their
+    wheels, their encoder readings and who is dead (:mod:`firmware_sim.world_step`)."""
+
+    def __init__(self, world: WorldParams, n: int, ids: np.ndarray, pose: np.ndarray,
+                 period: float, a: float, k: types.SimpleNamespace):
+        self.world, self.period, self.k = world, period, k
+        self.truth = world.ideal
+        self.world_f = np.array([world.detection_noise, world.detection_dropout, a / 2.0])
+        self.alive = np.ones(n, bool)
+        index = {int(r): i for i, r in enumerate(ids)}
+        self.kill_at = np.full(n, np.inf)
+        for kill in world.kill:
+            self.kill_at[index[kill.robot]] = kill.at
+        self.held = np.zeros((n, 2))           # the last command of each agent alive
+        self.watchdog = drivers.WATCHDOG
+        self.staleness = TimeoutSettings().staleness
+        self.est = pose.copy()                 # odometry
+        self.last_read = np.zeros((n, 2))
+        if world.odometry:                     # the first reading sets the origin
+            k.odometry(0, world.seed, world.encoder_noise, np.zeros((n, 2)), self.last_read,
+                       1.0, 1.0, pose.copy())
+        depth = int(math.ceil((world.link_delay + 4.0 * world.link_jitter) / period)) + 3
+        self.hist = np.zeros((depth, n, 6))
+        self.arrive = np.full((depth, n), np.inf)
+        self.view = np.zeros((n, 6))
+        self.view[:, 5] = -np.inf
+        self.bad = np.zeros(n, np.int64)
+        self.slip = np.zeros((n, 2))
+        self.seen = np.zeros((n, 3))
+
+    def before_control(self, step: int, t: float, pose: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(own pose, seen positions, world_i) for :func:`swarm_step.control` at t [s]."""
+        np.less(t, self.kill_at, out=self.alive)
+        if self.truth:
+            return pose, pose, np.array([1, 0, step], np.int64)
+        self.k.deliver(t, self.hist, self.arrive, self.view, self.staleness, self.seen)
+        own = self.est if self.world.odometry else pose
+        return own, self.seen, np.array([0, self.world.seed, step], np.int64)
+
+    def after_control(self, step: int, t: float, own: np.ndarray, cmd: np.ndarray) -> None:
+        """Dead agents command nothing new (their drivers hold the last command until
+        their watchdog stops them); the live ones publish their state."""
+        if self.world.kill:
+            alive, dead = self.alive, ~self.alive
+            self.held[alive] = cmd[alive, :2]
+            tripped = t >= self.kill_at + self.watchdog
+            cmd[dead, :2] = np.where(tripped[dead, None], 0.0, self.held[dead])
+        if not self.truth:
+            w = self.world
+            self.k.publish(step, self.period, own, cmd, self.alive, w.seed, w.link_delay,
+                           w.link_jitter, w.link_loss, w.loss_burst, self.bad, self.hist,
+                           self.arrive)
+
+    def before_plant(self, step: int) -> None:
+        """The wheels' slip for the coming period."""
+        if self.world.wheel_slip > 0:
+            self.k.slip_update(step, self.period, self.world.seed, self.world.wheel_slip,
+                               self.slip)
+
+    def after_plant(self, step: int, enc: np.ndarray, robot: RobotParams) -> None:
+        if self.world.odometry:
+            self.k.odometry(step + 1, self.world.seed, self.world.encoder_noise, enc,
+                            self.last_read, robot.wheel_radius, robot.wheel_base, self.est)

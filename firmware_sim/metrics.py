@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 TOLERANCE_MARGIN = 0.25  # m, added to the steady-state lag |p_d_dot| / K
+DEADLOCK_WINDOW = 10.0   # s without progress that makes a run deadlocked
+DEADLOCK_PROGRESS = 0.5  # m of tracking error a robot must shed in that window
 
 
 @dataclass
@@ -29,6 +31,12 @@ class RunMetrics:
     a: float
     min_pair_distance: float = math.inf
     min_obstacle_clearance: float = math.inf
+    min_pair_time: float | None = None               # s
+    min_clearance_time: float | None = None          # s
+    worst_pair: tuple[int, int] | None = None        # robot ids
+    worst_clearance: tuple[int, int] | None = None   # robot id, obstacle index
+    killed: list = field(default_factory=list)       # robot ids whose agent died
+    max_pose_error: float = 0.0                      # m, believed position vs truth
     max_abs_v: float = 0.0
     max_abs_u: float = 0.0
     mode_switches: int = 0
@@ -41,6 +49,7 @@ class RunMetrics:
     _seen_t: list = field(default_factory=list)
     _final_err: np.ndarray | None = None
     _final_within: np.ndarray | None = None
+    _errors: list = field(default_factory=list)      # (t, tracking errors) once a second
 
     def observe_geometry(self, t: float, pos: np.ndarray, pairs: np.ndarray,
                          robots: np.ndarray, clearance: np.ndarray,
@@ -50,22 +59,38 @@ class RunMetrics:
         robots ``robots`` (R,) to obstacle surfaces, inf where there is none. ``index``
         maps the rows of ``pos`` to the swarm's robots when ``pos`` holds only some."""
         ids = self.ids if index is None else self.ids[index]
+        rows = np.arange(len(pos)) if index is None else np.asarray(index)
         d = np.hypot(*(pos[pairs[:, 0]] - pos[pairs[:, 1]]).T)
         dmin = float(d.min()) if len(d) else math.inf
         cmin = float(clearance.min()) if clearance.size else math.inf
         close = pairs[d < self.a]
         inside = robots[(clearance < 0.0).any(axis=1)] if clearance.size else robots[:0]
+        who = np.full(4, -1)
+        if len(d):
+            who[:2] = rows[pairs[int(d.argmin())]]
+        if clearance.size:
+            r, k = np.unravel_index(int(clearance.argmin()), clearance.shape)
+            who[2:] = rows[robots[r]], k
         self.observe_extremes(t, dmin, cmin, [(int(ids[i]), int(ids[j])) for i, j in close],
-                              [int(ids[i]) for i in inside])
+                              [int(ids[i]) for i in inside], who)
 
     def observe_extremes(self, t: float, dmin: float, cmin: float,
                          colliding_pairs: list[tuple[int, int]],
-                         robots_in_obstacles: list[int]) -> None:
+                         robots_in_obstacles: list[int],
+                         who: np.ndarray | None = None) -> None:
         """The closest pair's distance [m] and the smallest clearance [m] at time t [s]
         (inf: none in range), with the robot-id pairs closer than a and the robots inside
-        an obstacle."""
-        self.min_pair_distance = min(self.min_pair_distance, dmin)
-        self.min_obstacle_clearance = min(self.min_obstacle_clearance, cmin)
+        an obstacle; ``who`` = (robot index, robot index, robot index, obstacle index) of
+        that pair and that clearance (indices into ``ids``; -1: none), when known."""
+        if dmin < self.min_pair_distance:
+            self.min_pair_distance, self.min_pair_time = dmin, t
+            if who is not None:
+                i, j = sorted((int(self.ids[who[0]]), int(self.ids[who[1]])))
+                self.worst_pair = (i, j)
+        if cmin < self.min_obstacle_clearance:
+            self.min_obstacle_clearance, self.min_clearance_time = cmin, t
+            if who is not None:
+                self.worst_clearance = (int(self.ids[who[2]]), int(who[3]))
         self.colliding_pairs.update(colliding_pairs)
         self.robots_in_obstacles.update(robots_in_obstacles)
         self.geometry_t.append(t)
@@ -84,6 +109,24 @@ class RunMetrics:
             self._last_bad_t = t
         self._seen_t.append(t)
         self._final_err, self._final_within = error, within
+        if not self._errors or t >= self._errors[-1][0] + 1.0:
+            self._errors.append((t, error.copy()))
+            while self._errors[0][0] < t - DEADLOCK_WINDOW - 1.0:
+                self._errors.pop(0)
+
+    @property
+    def deadlocked(self) -> list[int]:
+        """The robots (ids) outside their tolerance at the end that shed less than
+        DEADLOCK_PROGRESS of tracking error over the last DEADLOCK_WINDOW seconds: stuck,
+        or trailing their place at its own speed."""
+        if self._final_within is None or not self._errors:
+            return []
+        t_end = self._errors[-1][0]
+        then = [e for t, e in self._errors if t <= t_end - DEADLOCK_WINDOW]
+        if not then:
+            return []
+        stuck = ~self._final_within & (self._errors[-1][1] > then[-1] - DEADLOCK_PROGRESS)
+        return [int(i) for i in self.ids[stuck]]
 
     @property
     def convergence_time(self) -> float | None:
@@ -104,7 +147,13 @@ class RunMetrics:
             "robots": int(len(self.ids)),
             "duration": float(duration),
             "min_pair_distance": _finite_or_none(self.min_pair_distance),
+            "min_pair_time": self.min_pair_time,
+            "worst_pair": list(self.worst_pair) if self.worst_pair else None,
             "min_obstacle_clearance": _finite_or_none(self.min_obstacle_clearance),
+            "min_clearance_time": self.min_clearance_time,
+            "worst_clearance_robot": self.worst_clearance[0] if self.worst_clearance else None,
+            "worst_clearance_obstacle": (self.worst_clearance[1] if self.worst_clearance
+                                         else None),
             "max_abs_v": self.max_abs_v,
             "max_abs_u": self.max_abs_u,
             "converged": conv is not None,
@@ -115,7 +164,11 @@ class RunMetrics:
             "colliding_pairs": sorted(self.colliding_pairs),
             "robots_in_obstacles": sorted(self.robots_in_obstacles),
             "stuck_robots": stuck,
+            "deadlocked": bool(self.deadlocked),
+            "deadlocked_robots": self.deadlocked,
+            "killed_robots": list(self.killed),
             "mode_switches": self.mode_switches,
+            "max_pose_error": self.max_pose_error,
         }
 
 

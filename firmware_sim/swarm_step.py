@@ -19,6 +19,7 @@ import numpy as np
 from agent.formation import reference_point
 from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step
+from firmware_sim.world_step import FRESH, STALE, detect
 
 prange = range   # numba.prange when compiled
 
@@ -113,13 +114,54 @@ def sense_obstacles(x: float, y: float, obs: np.ndarray, sensing_range: float,
     return k
 
 
-def _control_range(lo: int, hi: int, pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray,
-                   offsets: np.ndarray, motion: np.ndarray, t: float, obs: np.ndarray,
-                   p: LawParams, period: float, sensing_range: float, a: float, reach: float,
-                   cap: int, watch_cap: int, sorted_xy: np.ndarray, grid: Grid,
-                   obs_grid: Grid, outs: tuple[np.ndarray, ...]) -> tuple[int, int]:
+def _watch(i: int, x: float, y: float, m: int, k: int, nbr_d: np.ndarray,
+           nbr_j: np.ndarray, o_x: np.ndarray, o_y: np.ndarray, o_r: np.ndarray,
+           o_k: np.ndarray, a: float, reach: float, watch_cap: int, out_near: np.ndarray,
+           watch_j: np.ndarray, watch_k: np.ndarray) -> int:
+    """Robot i's watch lists from the true neighbours (distances, indices) and obstacles
+    around its true position (x, y) (see :func:`control`); returns the capacity needed."""
+    nearest = math.inf
+    for q in range(m):
+        nearest = min(nearest, nbr_d[q])
+    out_near[i, 0] = nearest
+    limit = max(nearest, a) + 4.0 * reach
+    w = 0
+    for q in range(m):
+        if nbr_j[q] > i and nbr_d[q] <= limit:
+            if w < watch_cap:
+                watch_j[i, w] = nbr_j[q]
+            w += 1
+    if w < watch_cap:
+        watch_j[i, w] = -1
+    lowest = math.inf
+    for q in range(k):
+        dx, dy = o_x[q] - x, o_y[q] - y
+        lowest = min(lowest, math.sqrt(dx * dx + dy * dy) - o_r[q])
+    out_near[i, 1] = lowest
+    wk = 0
+    for q in range(k):
+        dx, dy = o_x[q] - x, o_y[q] - y
+        if math.sqrt(dx * dx + dy * dy) - o_r[q] <= lowest + 2.0 * reach:
+            if wk < watch_cap:
+                watch_k[i, wk] = o_k[q]
+            wk += 1
+    if wk < watch_cap:
+        watch_k[i, wk] = -1
+    return max(w + 1, wk + 1)
+
+
+def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np.ndarray,
+                   mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray,
+                   motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams,
+                   period: float, sensing_range: float, a: float, reach: float, cap: int,
+                   watch_cap: int, world_i: np.ndarray, world_f: np.ndarray,
+                   sorted_seen: np.ndarray, seen_grid: Grid, sorted_xy: np.ndarray,
+                   grid: Grid, obs_grid: Grid, outs: tuple[np.ndarray, ...]
+                   ) -> tuple[int, int]:
     """:func:`control` for robots lo..hi - 1: returns (capacity, watch capacity) needed."""
     out_cmd, out_ref, out_mem_f, out_mem_i, out_near, watch_j, watch_k = outs
+    truth, seed, step = world_i[0] != 0, world_i[1], world_i[2]
+    det_noise, det_dropout, stale_radius = world_f[0], world_f[1], world_f[2]
     need, need_watch = 0, 0
     max_r = obs[:, 2].max() if len(obs) else 0.0
     nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
@@ -127,19 +169,36 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, mem_f: np.ndarray, mem_i:
     o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
     o_k = np.empty(cap, np.int64)
     for i in range(lo, hi):
-        x, y = pose[i, 0], pose[i, 1]
-        m = sense_neighbours(i, x, y, sorted_xy, sensing_range, grid, cap, nbr_x, nbr_y,
-                             nbr_d, nbr_j)
+        x, y = own[i, 0], own[i, 1]
+        m = sense_neighbours(i, x, y, sorted_seen, sensing_range, seen_grid, cap, nbr_x,
+                             nbr_y, nbr_d, nbr_j)
         k = sense_obstacles(x, y, obs, sensing_range, max_r, obs_grid, cap, o_x, o_y, o_r,
                             o_k)
         need = max(need, m, k)
         if m > cap or k > cap:
             continue
+        if not truth:
+            k = detect(i, step, seed, det_noise, det_dropout, k, o_x, o_y, o_r, o_k)
+            # stale neighbours become static obstacles; unheard ones are unknown
+            fresh = 0
+            for q in range(m):
+                status = seen[nbr_j[q], 2]
+                if status == STALE:
+                    if k < cap:
+                        o_x[k], o_y[k], o_r[k], o_k[k] = nbr_x[q], nbr_y[q], stale_radius, -1
+                    k += 1
+                elif status == FRESH:
+                    nbr_x[fresh], nbr_y[fresh] = nbr_x[q], nbr_y[q]
+                    fresh += 1
+            m = fresh
+            need = max(need, k)
+            if k > cap:
+                continue
         rx, ry, rvx, rvy = reference_point(offsets[i, 0], offsets[i, 1], motion[0],
                                            motion[1], motion[2], motion[3], motion[4], t)
         mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
                         mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4])
-        v, u, mode, new = law_step(x, y, pose[i, 2], rx, ry, nbr_x[:m], nbr_y[:m],
+        v, u, mode, new = law_step(x, y, own[i, 2], rx, ry, nbr_x[:m], nbr_y[:m],
                                    o_x[:k], o_y[:k], o_r[:k], mem, p, period)
         out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2] = v, u, mode
         out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
@@ -148,54 +207,51 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, mem_f: np.ndarray, mem_i:
                                                              new.radius)
         out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
                                                              int(new.avoiding), new.side)
-        # what to watch during the period
-        nearest = math.inf
-        for q in range(m):
-            nearest = min(nearest, nbr_d[q])
-        out_near[i, 0] = nearest
-        limit = max(nearest, a) + 4.0 * reach
-        w = 0
-        for q in range(m):
-            if nbr_j[q] > i and nbr_d[q] <= limit:
-                if w < watch_cap:
-                    watch_j[i, w] = nbr_j[q]
-                w += 1
-        if w < watch_cap:
-            watch_j[i, w] = -1
-        lowest = math.inf
-        for q in range(k):
-            dx, dy = o_x[q] - x, o_y[q] - y
-            lowest = min(lowest, math.sqrt(dx * dx + dy * dy) - o_r[q])
-        out_near[i, 1] = lowest
-        wk = 0
-        for q in range(k):
-            dx, dy = o_x[q] - x, o_y[q] - y
-            if math.sqrt(dx * dx + dy * dy) - o_r[q] <= lowest + 2.0 * reach:
-                if wk < watch_cap:
-                    watch_k[i, wk] = o_k[q]
-                wk += 1
-        if wk < watch_cap:
-            watch_k[i, wk] = -1
-        need_watch = max(need_watch, w + 1, wk + 1)
+        # what to watch during the period: around the truth
+        if not truth:
+            x, y = pose[i, 0], pose[i, 1]
+            m = sense_neighbours(i, x, y, sorted_xy, sensing_range, grid, cap, nbr_x, nbr_y,
+                                 nbr_d, nbr_j)
+            k = sense_obstacles(x, y, obs, sensing_range, max_r, obs_grid, cap, o_x, o_y,
+                                o_r, o_k)
+            need = max(need, m, k)
+            if m > cap or k > cap:
+                continue
+        need_watch = max(need_watch, _watch(i, x, y, m, k, nbr_d, nbr_j, o_x, o_y, o_r, o_k,
+                                            a, reach, watch_cap, out_near, watch_j, watch_k))
     return need, need_watch
 
 
-def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray,
-            motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams, period: float,
-            sensing_range: float, a: float, reach: float, cap: int, watch_cap: int,
-            out_cmd: np.ndarray, out_ref: np.ndarray, out_mem_f: np.ndarray,
-            out_mem_i: np.ndarray, out_near: np.ndarray, watch_j: np.ndarray,
-            watch_k: np.ndarray) -> tuple[int, int]:
+def _sorted(pos: np.ndarray, grid: Grid) -> np.ndarray:
+    """Positions (N, >= 2) [m] in the order of ``grid`` (contiguous reads per cell)."""
+    out = np.empty((len(pos), 2))
+    for q in range(len(pos)):
+        out[q, 0], out[q, 1] = pos[grid[1][q], 0], pos[grid[1][q], 1]
+    return out
+
+
+def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, mem_f: np.ndarray,
+            mem_i: np.ndarray, offsets: np.ndarray, motion: np.ndarray, t: float,
+            obs: np.ndarray, p: LawParams, period: float, sensing_range: float, a: float,
+            reach: float, cap: int, watch_cap: int, world_i: np.ndarray,
+            world_f: np.ndarray, out_cmd: np.ndarray, out_ref: np.ndarray,
+            out_mem_f: np.ndarray, out_mem_i: np.ndarray, out_near: np.ndarray,
+            watch_j: np.ndarray, watch_k: np.ndarray) -> tuple[int, int]:
     """Sense and run the law for every robot.
 
-    pose (N, 3) [m, m, rad]; memory of :class:`LawMemory` as floats (N, 5): prev_ex,
-    prev_ey, center_x, center_y, radius, and ints (N, 3): has_prev, avoiding, side;
-    offsets (N, 2) [m] and motion (5,) = centre0 x, y [m], velocity x, y [m/s], omega
-    [rad/s] of the formation; obs (K, 3) = obstacle centre x, y and radius [m].
+    pose (N, 3) [m, m, rad] the truth; own (N, 3) the pose each robot believes it has;
+    seen (N, 3) where the robots believe the others are: x, y [m] and NONE, FRESH or STALE
+    (:mod:`firmware_sim.world_step`); world_i = (1 when own and seen are the truth and
+    detections exact, seed, period number), world_f = (detection noise [m], detection
+    dropout, radius [m] of a stale neighbour as an obstacle). Memory of
+    :class:`LawMemory` as floats (N, 5): prev_ex, prev_ey, center_x, center_y, radius, and
+    ints (N, 3): has_prev, avoiding, side; offsets (N, 2) [m] and motion (5,) = centre0 x,
+    y [m], velocity x, y [m/s], omega [rad/s] of the formation; obs (K, 3) = obstacle
+    centre x, y and radius [m].
     Out: out_cmd (N, 3) = v [m/s], u [rad/s], mode; out_ref (N, 4) = p_d, p_d_dot; the new
-    memory; out_near (N, 2) [m]: the distance to the nearest neighbour and the smallest
-    clearance to an obstacle in range (inf: none); the watch lists: watch_j (N, watch_cap)
-    the robots j > i whose distance is within
+    memory; out_near (N, 2) [m]: the true distance to the nearest neighbour and the
+    smallest clearance to an obstacle in range (inf: none); the watch lists, on the truth:
+    watch_j (N, watch_cap) the robots j > i whose distance is within
     max(nearest of i, a) + 4 reach (``reach`` [m]: the farthest a robot moves in a period),
     watch_k (N, watch_cap) the obstacles whose clearance is within the robot's smallest + 2
     reach; -1 ends a list. Returns the capacities needed: (neighbours or obstacles sensed
@@ -204,9 +260,12 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
     """
     n, k_obs = len(pose), len(obs)
     grid = build_grid(pose[:, 0], pose[:, 1], sensing_range, 4 * n + 64)
-    sorted_xy = np.empty((n, 2))
-    for q in range(n):
-        sorted_xy[q, 0], sorted_xy[q, 1] = pose[grid[1][q], 0], pose[grid[1][q], 1]
+    sorted_xy = _sorted(pose, grid)
+    if world_i[0] != 0:
+        seen_grid, sorted_seen = grid, sorted_xy
+    else:
+        seen_grid = build_grid(seen[:, 0], seen[:, 1], sensing_range, 4 * n + 64)
+        sorted_seen = _sorted(seen, seen_grid)
     max_r = obs[:, 2].max() if k_obs else 0.0
     obs_grid = build_grid(obs[:, 0], obs[:, 1], sensing_range + max_r, 4 * max(n, k_obs) + 64)
     chunks = min(n, 64)
@@ -216,15 +275,16 @@ def control(pose: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.
         # the robots of a chunk in a plain function: numba optimises it better than the
         # body of a parallel loop
         need[chunk, 0], need[chunk, 1] = _control_range(
-            chunk * n // chunks, (chunk + 1) * n // chunks, pose, mem_f, mem_i, offsets,
-            motion, t, obs, p, period, sensing_range, a, reach, cap, watch_cap, sorted_xy,
-            grid, obs_grid, outs)
+            chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, mem_f, mem_i,
+            offsets, motion, t, obs, p, period, sensing_range, a, reach, cap, watch_cap,
+            world_i, world_f, sorted_seen, seen_grid, sorted_xy, grid, obs_grid, outs)
     return (need[:, 0].max(), need[:, 1].max()) if chunks else (0, 0)
 
 
-def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
-            wheel_radius: float, wheel_base: float, speed_limit: float, ramp: float,
-            dt: float, substeps: int, watched: np.ndarray, out_pos: np.ndarray) -> None:
+def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, slip: np.ndarray,
+            enc: np.ndarray, ideal: bool, wheel_radius: float, wheel_base: float,
+            speed_limit: float, ramp: float, dt: float, substeps: int, watched: np.ndarray,
+            out_pos: np.ndarray) -> None:
     """Move every robot through ``substeps`` physics steps of ``dt`` [s]; pose updated.
 
     ``ideal``: the commands (v, u) of ``cmd[0]`` applied exactly (one exact arc from the
@@ -232,7 +292,9 @@ def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
     ``watched``). Otherwise through the wheel drivers: in substep s the drivers follow the
     commands ``cmd[s - 1]`` (substeps, N, >= 2) (those issued a drive latency earlier),
     set-points of :func:`wheel_command` (speed limit [rev/s]), wheel speeds ``wheels``
-    (N, 2) (right, left) [rev/s] ramped at ``ramp`` [rev/s^2] and held over each substep.
+    (N, 2) (right, left) [rev/s] ramped at ``ramp`` [rev/s^2] and held over each substep;
+    the wheels turn ``enc`` (N, 2) [rev] further and move the ground by (1 - ``slip``) (N,
+    2) of that.
     out_pos (substeps + 1, N, 2): positions at the period's start and after each substep
     (of the watched robots at least).
     """
@@ -249,12 +311,16 @@ def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
         else:
             step = ramp * dt
             wr, wl = wheels[i, 0], wheels[i, 1]
+            grip_r, grip_l = 1.0 - slip[i, 0], 1.0 - slip[i, 1]
             for s in range(1, substeps + 1):
                 target_r, target_l = wheel_command(cmd[s - 1, i, 0], cmd[s - 1, i, 1],
                                                    wheel_radius, wheel_base, speed_limit)
                 wr += min(max(target_r - wr, -step), step)
                 wl += min(max(target_l - wl, -step), step)
-                bv, bu = body_velocity(TWO_PI * wr, TWO_PI * wl, wheel_radius, wheel_base)
+                enc[i, 0] += wr * dt
+                enc[i, 1] += wl * dt
+                bv, bu = body_velocity(TWO_PI * wr * grip_r, TWO_PI * wl * grip_l,
+                                       wheel_radius, wheel_base)
                 x, y, th = arc_step(x, y, th, bv * dt, bu * dt)
                 out_pos[s, i, 0], out_pos[s, i, 1] = x, y
             wheels[i, 0], wheels[i, 1] = wr, wl
@@ -264,13 +330,14 @@ def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, ideal: bool,
 def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.ndarray,
              a: float, first: int, pair_limit: float, clear_limit: float,
              watched: np.ndarray, out_dmin: np.ndarray, out_cmin: np.ndarray,
-             hit_j: np.ndarray, hit_k: np.ndarray) -> int:
+             out_who: np.ndarray, hit_j: np.ndarray, hit_k: np.ndarray) -> int:
     """Closest pair and smallest clearance at each substep s >= ``first`` of ``pos`` (S, N,
     2), over the watch lists of :func:`control` of the ``watched`` robots, for the pairs
     no farther than ``pair_limit`` [m] and the obstacles no farther than ``clear_limit`` [m]
-    at the period's start: out_dmin, out_cmin (S,) [m] (inf: none). hit_j / hit_k (N, cap)
-    are set where a watched pair came closer than a / a robot centre entered a watched
-    obstacle; returns how many robots set one.
+    at the period's start: out_dmin, out_cmin (S,) [m] (inf: none), out_who (S, 4) = the
+    closest pair's robot indices and the robot and obstacle of the smallest clearance (-1:
+    none). hit_j / hit_k (N, cap) are set where a watched pair came closer than a / a robot
+    centre entered a watched obstacle; returns how many robots set one.
 
     Robots move at most ``reach`` per period, so with pair_limit = max(closest pair, a) +
     4 reach and clear_limit = max(smallest clearance, 0) + 2 reach the minima and the hits
@@ -279,6 +346,8 @@ def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.
     n_sub, n = pos.shape[0], pos.shape[1]
     d_robot = np.full((n_sub, n), np.inf)
     c_robot = np.full((n_sub, n), np.inf)
+    j_robot = np.full((n_sub, n), -1, np.int64)
+    k_robot = np.full((n_sub, n), -1, np.int64)
     hit = np.zeros(n, np.int64)
     for i in prange(n):
         if not watched[i]:
@@ -294,7 +363,8 @@ def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.
             for s in range(first, n_sub):
                 dx, dy = pos[s, j, 0] - pos[s, i, 0], pos[s, j, 1] - pos[s, i, 1]
                 d = math.sqrt(dx * dx + dy * dy)
-                d_robot[s, i] = min(d_robot[s, i], d)
+                if d < d_robot[s, i]:
+                    d_robot[s, i], j_robot[s, i] = d, j
                 if d < a:
                     hit_j[i, w] = True
                     hit[i] = 1
@@ -308,31 +378,37 @@ def geometry(pos: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray, obs: np.
             for s in range(first, n_sub):
                 dx, dy = obs[k, 0] - pos[s, i, 0], obs[k, 1] - pos[s, i, 1]
                 c = math.sqrt(dx * dx + dy * dy) - obs[k, 2]
-                c_robot[s, i] = min(c_robot[s, i], c)
+                if c < c_robot[s, i]:
+                    c_robot[s, i], k_robot[s, i] = c, k
                 if c < 0.0:
                     hit_k[i, w] = True
                     hit[i] = 1
     for s in range(n_sub):
         out_dmin[s], out_cmin[s] = math.inf, math.inf
+        for c in range(4):
+            out_who[s, c] = -1
         for i in range(n):
-            out_dmin[s] = min(out_dmin[s], d_robot[s, i])
-            out_cmin[s] = min(out_cmin[s], c_robot[s, i])
+            if d_robot[s, i] < out_dmin[s]:
+                out_dmin[s], out_who[s, 0], out_who[s, 1] = d_robot[s, i], i, j_robot[s, i]
+            if c_robot[s, i] < out_cmin[s]:
+                out_cmin[s], out_who[s, 2], out_who[s, 3] = c_robot[s, i], i, k_robot[s, i]
     return hit.sum()
 
 
 def period_summary(pose: np.ndarray, cmd: np.ndarray, ref: np.ndarray, K: float,
-                   margin: float, first: bool, last_mode: np.ndarray, out_err: np.ndarray,
-                   out_within: np.ndarray) -> tuple[float, float, int, bool]:
+                   margin: float, first: bool, alive: np.ndarray, last_mode: np.ndarray,
+                   out_err: np.ndarray, out_within: np.ndarray) -> tuple[float, float, int, bool]:
     """The period's convergence and command metrics: each robot's tracking error [m]
-    (out_err) and whether it is within |p_d_dot| / K + ``margin`` (out_within); returns
-    (max |v| [m/s], max |u| [rad/s], mode switches since ``last_mode`` (none when
-    ``first``), all within). ``last_mode`` is updated to this period's modes."""
+    (out_err) and whether it is within |p_d_dot| / K + ``margin`` (out_within; a robot not
+    ``alive`` counts as within); returns (max |v| [m/s], max |u| [rad/s], mode switches
+    since ``last_mode`` (none when ``first``), all within). ``last_mode`` is updated to this
+    period's modes."""
     max_v, max_u, switches, all_within = 0.0, 0.0, 0, True
     for i in range(len(pose)):
         ex, ey = pose[i, 0] - ref[i, 0], pose[i, 1] - ref[i, 1]
         out_err[i] = math.sqrt(ex * ex + ey * ey)
         tol = math.sqrt(ref[i, 2] * ref[i, 2] + ref[i, 3] * ref[i, 3]) / K + margin
-        out_within[i] = out_err[i] <= tol
+        out_within[i] = out_err[i] <= tol or not alive[i]
         all_within = all_within and out_within[i]
         max_v, max_u = max(max_v, abs(cmd[i, 0])), max(max_u, abs(cmd[i, 1]))
         if not first and cmd[i, 2] != last_mode[i]:

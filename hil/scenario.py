@@ -10,6 +10,7 @@ Format (every field, with its unit and default, in docs/formats.md)::
     [formation]                     # kind, spacing, center0, velocity, omega, offsets
     [[robots]]                      # id, pose = [x, y, theta], in formation order
     [[obstacles]]                   # center = [x, y], radius
+    [world]                         # firmware_sim.world.WorldParams, optional (ideal)
 
 Every problem is reported as :class:`ScenarioError` naming the file and the field.
 """
@@ -25,7 +26,7 @@ from agent.config import ControlParams, RobotParams
 from agent.formation import Formation, FormationKind, formation_offsets
 from common.schema import ConfigError, TableReader, from_table, load_toml
 from firmware_sim.plant import PlantKind
-from firmware_sim.world import Obstacles
+from firmware_sim.world import Obstacles, WorldParams
 
 
 class ScenarioError(ValueError):
@@ -45,10 +46,12 @@ class Scenario:
     sensing_range: float        # m
     substeps: int
     plant: PlantKind
+    world: WorldParams = WorldParams()
     source: Path | None = None
 
 
-TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles"}
+TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles",
+            "world"}
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -69,6 +72,7 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
     try:
         control = from_table(ControlParams, rd.table(doc, "control"), f"{where} [control]")
         robot = from_table(RobotParams, rd.table(doc, "robot"), f"{where} [robot]")
+        world = from_table(WorldParams, rd.table(doc, "world"), f"{where} [world]")
     except ConfigError as exc:
         raise ScenarioError(str(exc)) from None
 
@@ -85,6 +89,9 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
         ids.append(rid)
         poses.append(rd.vector(r, "pose", f"{field}.pose", 3))
 
+    for i, kill in enumerate(world.kill):
+        if kill.robot not in ids:
+            raise rd.fail(f"[world.kill][{i}].robot", f"no robot {kill.robot} in [[robots]]")
     formation = _formation(rd, rd.table(doc, "formation"), len(ids), control)
 
     obs = rd.array_of_tables(doc, "obstacles", required=False)
@@ -116,7 +123,8 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
     return Scenario(name=name, duration=duration, control=control, robot=robot,
                     formation=formation, ids=np.array(ids, dtype=int),
                     poses=np.array(poses, dtype=float), obstacles=obstacles,
-                    sensing_range=sensing, substeps=substeps, plant=plant, source=source)
+                    sensing_range=sensing, substeps=substeps, plant=plant, world=world,
+                    source=source)
 
 
 def _formation(rd: TableReader, table: dict, n: int, control: ControlParams) -> Formation:

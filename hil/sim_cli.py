@@ -11,7 +11,7 @@ from rich.console import Console
 from firmware_sim.plant import PlantKind
 from hil.cli_options import Subparsers
 from hil.console import LazyProgress, summary_table
-from hil.exit_codes import EXIT_OK, EXIT_UNSAFE
+from hil.exit_codes import EXIT_OK, EXIT_UNSAFE, BadInput
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -21,7 +21,8 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--duration", type=float, help="override the scenario's duration [s]")
     p.add_argument("--plant", choices=[k.value for k in PlantKind],
                    help="ideal unicycle, or wheels with the drivers' speed limit and ramp "
-                        "(default: the scenario's; wheels with --robot)")
+                        "(default: the scenario's; wheels with --robot or a [world] with "
+                        "wheel slip or encoder noise)")
     p.add_argument("--robot", metavar="FILE",
                    help="robot profile (robots/*.toml) instead of the scenario's [robot]")
     p.add_argument("--substeps", type=int, help="physics steps per control period")
@@ -45,6 +46,11 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if args.robot:                  # a real robot's limits apply unless --plant says not
         sc = dataclasses.replace(sc, robot=load_robot_profile(args.robot))
         plant = PlantKind(args.plant) if args.plant else PlantKind.WHEELS
+    if sc.world.odometry and plant is PlantKind.IDEAL:
+        if args.plant:
+            raise BadInput("--plant ideal: the scenario's [world] has wheel slip or encoder "
+                           "noise, which need the wheels plant")
+        plant = PlantKind.WHEELS
     options = SimOptions(duration=args.duration or sc.duration,
                          sensing_range=sc.sensing_range,
                          substeps=args.substeps or sc.substeps, plant=plant,
@@ -54,7 +60,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     started = time.perf_counter()
     with LazyProgress(console, f"sim {sc.name}") as progress:
         result = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
-                          options, progress=progress)
+                          options, world=sc.world, progress=progress)
     elapsed = time.perf_counter() - started
     metrics = result.metrics.summary(sc.name, options.duration)
     metrics["plant"] = options.plant.value

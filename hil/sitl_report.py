@@ -106,13 +106,13 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
     for ts in samples:
         pos = np.stack([_at(*truth_series[j], np.array([ts]))[0, :2] for j in range(n)])
         metrics.observe_geometry(float(ts), pos, pairs, robots, obstacles.clearance(pos))
-    last_mode = np.zeros(n)
+    last_mode, alive = np.zeros(n), np.ones(n, bool)
     for k, tk in enumerate(t):
         cmd = np.column_stack([v[k], u[k], mode[k]]).astype(float)
         err, within = np.zeros(n), np.zeros(n, bool)
         max_v, max_u, switches, all_within = period_summary(
             pose[k], cmd, np.column_stack([ref[k], ref_vel[k]]), sc.control.K,
-            TOLERANCE_MARGIN, k == 0, last_mode, err, within)
+            TOLERANCE_MARGIN, k == 0, alive, last_mode, err, within)
         metrics.observe_period(float(tk), max_v, max_u, switches, err, within, all_within)
     data = RunData(ids=sc.ids, t=t, pose=pose, v=v, u=u, mode=mode, ref=ref,
                    dist_t=np.asarray(metrics.geometry_t),

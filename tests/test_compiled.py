@@ -11,15 +11,16 @@ from agent.formation import Formation, FormationKind, formation_offsets
 from firmware_sim import compiled
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
-from firmware_sim.world import Obstacles
+from firmware_sim.world import Kill, Obstacles, WorldParams
 from hil.scenario import load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
 
-def both(ids, poses, form, obstacles, robot=None, **options):
+def both(ids, poses, form, obstacles, robot=None, world=None, **options):
     return [simulate(ids, poses, form, obstacles, ControlParams(), robot or RobotParams(),
-                     SimOptions(compiled=flag, **options)) for flag in (False, True)]
+                     SimOptions(compiled=flag, **options), world=world)
+            for flag in (False, True)]
 
 
 def assert_equal_runs(a, b):
@@ -51,6 +52,19 @@ def test_crowded_swarm_with_wheels_compiled_equals_interpreted():
                 duration=4.0, plant=PlantKind.WHEELS)
     assert_equal_runs(a, b)
     assert a.metrics.summary("x", 1.0)["mode_switches"] > 0
+
+
+def test_imperfect_world_compiled_equals_interpreted():
+    """Every imperfection at once: the same random draws and the same run, compiled or not."""
+    sc = load_scenario(SCENARIOS / "paper.toml")
+    world = WorldParams(seed=5, link_delay=0.2, link_jitter=0.05, link_loss=0.2,
+                        loss_burst=3.0, wheel_slip=0.03, encoder_noise=0.002,
+                        detection_noise=0.1, detection_dropout=0.1,
+                        kill=(Kill(robot=3, at=2.0),))
+    a, b = both(sc.ids, sc.poses, sc.formation, sc.obstacles, world=world, duration=6.0,
+                plant=PlantKind.WHEELS)
+    assert_equal_runs(a, b)
+    assert a.metrics.summary("x", 1.0)["max_pose_error"] > 0
 
 
 def test_compiled_needs_numba(monkeypatch):

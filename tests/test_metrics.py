@@ -10,9 +10,14 @@ def test_tolerance_is_lag_plus_margin():
     pose = np.array([[-0.75, 0.0, 0.0], [-0.76, 0.0, 0.0]])
     ref = np.array([[0.0, 0.0, 2.0, 0.0], [0.0, 0.0, 2.0, 0.0]])
     err, within = np.zeros(2), np.zeros(2, bool)
-    period_summary(pose, np.zeros((2, 3)), ref, 4.0, TOLERANCE_MARGIN, True, np.zeros(2), err,
-                   within)
+    alive = np.ones(2, bool)
+    period_summary(pose, np.zeros((2, 3)), ref, 4.0, TOLERANCE_MARGIN, True, alive,
+                   np.zeros(2), err, within)
     assert err == pytest.approx([0.75, 0.76]) and within.tolist() == [True, False]
+    alive[1] = False                    # a dead robot is not waited for
+    period_summary(pose, np.zeros((2, 3)), ref, 4.0, TOLERANCE_MARGIN, True, alive,
+                   np.zeros(2), err, within)
+    assert within.tolist() == [True, True]
 
 
 def _control(m, t, err):
@@ -50,6 +55,21 @@ def test_collisions_count_pairs_and_robots_inside_obstacles():
     assert s["collisions"] == 2
     assert s["colliding_pairs"] == [(1, 2)] and s["robots_in_obstacles"] == [3]
     assert s["min_pair_distance"] == 0.5 and s["min_obstacle_clearance"] == -0.1
+    assert s["worst_pair"] == [1, 2] and s["min_pair_time"] == 0.0
+    assert s["worst_clearance_robot"] == 3 and s["worst_clearance_obstacle"] == 0
+
+
+def test_deadlock_is_no_progress_over_the_window():
+    """Robot 8 sheds 0.3 m in 10 s (deadlocked), robot 9 sheds 2 m (still arriving)."""
+    m = RunMetrics(ids=np.array([7, 8, 9]), a=1.0)
+    for t in range(21):
+        _control(m, float(t), [0.1, 5.0 - 0.03 * t, 30.0 - 0.2 * t])
+    s = m.summary("x", 20.0)
+    assert s["deadlocked"] and s["deadlocked_robots"] == [8]
+    m = RunMetrics(ids=np.array([7]), a=1.0)
+    for t in range(5):                  # shorter than the window: no verdict
+        _control(m, float(t), [5.0])
+    assert not m.summary("x", 4.0)["deadlocked"]
 
 
 def test_mode_switches_are_counted():
@@ -58,6 +78,7 @@ def test_mode_switches_are_counted():
     for k, modes in enumerate(([0, 0], [1, 0], [1, 2], [0, 0])):
         cmd = np.column_stack([np.zeros(2), np.zeros(2), modes]).astype(float)
         summary = period_summary(np.zeros((2, 3)), cmd, np.zeros((2, 4)), 4.0,
-                                 TOLERANCE_MARGIN, k == 0, last_mode, err, within)
+                                 TOLERANCE_MARGIN, k == 0, np.ones(2, bool), last_mode, err,
+                                 within)
         m.observe_period(0.0, summary[0], summary[1], summary[2], err, within, summary[3])
     assert m.summary("x", 1.0)["mode_switches"] == 4

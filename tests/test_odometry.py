@@ -13,18 +13,16 @@ def test_odometry_from_encoders_matches_the_plant_truth():
     wheels = np.zeros((1, 2))                            # actual (right, left) [rev/s]
     truth = np.array([[1.0, -2.0, 0.4]])
     odo = Odometry(robot.wheel_radius, robot.wheel_base, truth[0].copy())
-    enc = np.zeros(2)                                    # encoder positions [rev]
-    odo.update(*enc)
+    enc = np.zeros((1, 2))                # encoder positions [rev], counted by the plant
+    odo.update(*enc[0])
     dt = 0.005
     rng = np.random.default_rng(0)
     for k in range(2000):
         if k % 200 == 0:
             v, u = rng.uniform(-8, 8), rng.uniform(-4, 4)
-        advance(truth, np.array([[[v, u]]]), wheels, False, robot.wheel_radius,
-                robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1,
-                np.ones(1, bool),
-                np.zeros((2, 1, 2)))
-        enc = enc + wheels[0] * dt                        # encoders integrate actual speed
-        est = odo.update(*enc)
+        advance(truth, np.array([[[v, u]]]), wheels, np.zeros((1, 2)), enc, False,
+                robot.wheel_radius, robot.wheel_base, robot.wheel_speed_limit,
+                robot.wheel_ramp, dt, 1, np.ones(1, bool), np.zeros((2, 1, 2)))
+        est = odo.update(*enc[0])
     assert est[:2] == pytest.approx(truth[0, :2], abs=1e-6)
     assert math.cos(est[2] - truth[0, 2]) == pytest.approx(1.0, abs=1e-9)

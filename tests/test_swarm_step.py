@@ -9,10 +9,12 @@ from agent.config import RobotParams
 from firmware_sim.swarm_step import advance, build_grid
 
 
-def _advance(pose, v, u, wheels, ideal, robot, dt, substeps):
+def _advance(pose, v, u, wheels, ideal, robot, dt, substeps, slip=None, enc=None):
     pos = np.zeros((substeps + 1, len(pose), 2))
     cmd = np.repeat(np.column_stack([v, u])[None], substeps, axis=0)   # each substep
-    advance(pose, cmd, wheels, ideal, robot.wheel_radius, robot.wheel_base,
+    slip = np.zeros((len(pose), 2)) if slip is None else slip
+    enc = np.zeros((len(pose), 2)) if enc is None else enc
+    advance(pose, cmd, wheels, slip, enc, ideal, robot.wheel_radius, robot.wheel_base,
             robot.wheel_speed_limit, robot.wheel_ramp, dt, substeps,
             np.ones(len(pose), bool), pos)
     return pos
@@ -44,6 +46,16 @@ def test_wheel_plant_ramps_and_limits():
     _advance(pose, [50.0], [0.0], wheels, False, robot, 0.01, 1)
     assert (pose[0, 0] - x) / 0.01 == pytest.approx(robot.v_wheel_max)
     assert pose[0, 1:] == pytest.approx([0.0, 0.0])
+
+
+def test_slipping_wheels_turn_more_than_the_ground_moves():
+    """20 % slip on both wheels: the encoders count every turn, the robot moves 80 %."""
+    robot = RobotParams(wheel_ramp=1e6)
+    pose, wheels, enc = np.zeros((1, 3)), np.zeros((1, 2)), np.zeros((1, 2))
+    _advance(pose, [1.0], [0.0], wheels, False, robot, 0.01, 10, np.full((1, 2), 0.2), enc)
+    turns = 1.0 * 0.1 / (2 * math.pi * robot.wheel_radius)      # 1 m/s for 0.1 s, in rev
+    assert enc[0] == pytest.approx([turns, turns])
+    assert pose[0] == pytest.approx([0.08, 0.0, 0.0])
 
 
 def test_grid_holds_every_point_in_its_cell():

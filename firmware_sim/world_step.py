@@ -1,0 +1,164 @@
+"""One control period of an imperfect world (:class:`firmware_sim.world.WorldParams`).
+
+What an agent would know, produced from the plant's truth: its pose from the odometry of
+slipping wheels read through noisy encoders, and its neighbours' states as they arrive over
+a link with delay, jitter and bursty loss. Every random draw is a hash of (seed, stream,
+robot, index, period), so a run is reproducible from its scenario and seed whatever the
+number of threads, and the compiled and interpreted runs draw the same numbers. Compiled
+with the law (:mod:`firmware_sim.compiled`); plain floats, ints and arrays only.
+
+The model (docs/world.md): each robot publishes its odometry pose and command every period;
+a state is lost or delivered to every receiver alike, with one age drawn per state; a
+receiver keeps the newest state that has arrived (by stamp) and extrapolates it with
+:func:`agent.neighbours.extrapolate`, the agents' code.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.neighbours import extrapolate
+from agent.odometry import odometry_step
+
+prange = range   # numba.prange when compiled
+
+M32 = 0xFFFFFFFF
+LOSS, AGE, SLIP, ENCODER, DETECT, DROPOUT = 1, 2, 3, 4, 5, 6   # streams of draws
+NONE, FRESH, STALE = 0, 1, 2                           # what a robot knows of a neighbour
+SLIP_TIME = 1.0      # s, correlation time of wheel slip
+TIME_EPS = 1e-9      # s, arrival times equal to a period's start up to rounding count as due
+
+
+def _mul32(h: int, c: int) -> int:
+    """h * c mod 2^32 for h, c < 2^32, with no intermediate above 2^49 (signed overflow is
+    undefined in compiled code)."""
+    return (h * (c & 0xFFFF) + (((h * (c >> 16)) & 0xFFFF) << 16)) & M32
+
+
+def _fmix(h: int) -> int:
+    """MurmurHash3's 32-bit finaliser."""
+    h ^= h >> 16
+    h = _mul32(h, 0x85EBCA6B)
+    h ^= h >> 13
+    h = _mul32(h, 0xC2B2AE35)
+    return h ^ (h >> 16)
+
+
+def _combine(h: int, x: int) -> int:
+    """Hash the non-negative integer x (< 2^32) into h."""
+    return _fmix((h + _mul32(x & M32, 0x9E3779B1) + 0x7F4A7C15) & M32)
+
+
+def uniform(seed: int, stream: int, a: int, b: int, step: int) -> float:
+    """A uniform draw in (0, 1), a function of its five non-negative integer keys."""
+    h = _combine(_combine(_combine(0, seed & M32), seed >> 32), stream)
+    h = _combine(_combine(_combine(h, a), b), step)
+    return (h + 0.5) / 4294967296.0
+
+
+def normal(seed: int, stream: int, a: int, b: int, step: int) -> float:
+    """A standard normal draw (Box-Muller), a function of its keys."""
+    u1 = uniform(seed, stream, a, 2 * b, step)
+    u2 = uniform(seed, stream, a, 2 * b + 1, step)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+def publish(step: int, period: float, est: np.ndarray, cmd: np.ndarray, alive: np.ndarray,
+            seed: int, delay: float, jitter: float, loss: float, burst: float,
+            bad: np.ndarray, hist: np.ndarray, arrive: np.ndarray) -> None:
+    """Every live robot publishes its state of this period: ``est`` (N, 3) pose [m, m,
+    rad] and ``cmd`` (N, >= 2) v [m/s], u [rad/s], into ring slot step % H of ``hist`` (H,
+    N, 6: x, y, theta, v, u, stamp [s]) with its arrival time [s] in ``arrive`` (H, N)
+    (inf: lost or not sent). Loss: independent with probability ``loss`` when ``burst`` is
+    1, else a Gilbert-Elliott channel (``bad`` (N,) its state) with mean burst ``burst``.
+    Age: delay + jitter * normal, at least 0 and at most H - 2 periods."""
+    slot = step % hist.shape[0]
+    longest = (hist.shape[0] - 2) * period
+    stay_bad = 1.0 - 1.0 / burst
+    go_bad = loss / (burst * (1.0 - loss)) if burst > 1.0 else loss
+    for j in prange(est.shape[0]):
+        hist[slot, j, 0], hist[slot, j, 1], hist[slot, j, 2] = est[j, 0], est[j, 1], est[j, 2]
+        hist[slot, j, 3], hist[slot, j, 4] = cmd[j, 0], cmd[j, 1]
+        hist[slot, j, 5] = step * period
+        lost = not alive[j]
+        if alive[j] and loss > 0.0:
+            draw = uniform(seed, LOSS, j, 0, step)
+            if burst > 1.0:
+                bad[j] = 1 if draw < (stay_bad if bad[j] else go_bad) else 0
+                lost = bad[j] != 0
+            else:
+                lost = draw < loss
+        age = delay
+        if jitter > 0.0:
+            age += jitter * normal(seed, AGE, j, 0, step)
+        arrive[slot, j] = math.inf if lost else step * period + min(max(age, 0.0), longest)
+
+
+def deliver(t: float, hist: np.ndarray, arrive: np.ndarray, view: np.ndarray,
+            staleness: float, out_seen: np.ndarray) -> None:
+    """What the robots know of each other at time t [s]: ``view`` (N, 6) holds, per robot,
+    the newest of its states that has arrived (stamp -inf: none yet), updated from the ring
+    of :func:`publish`; ``out_seen`` (N, 3) = the position [m] extrapolated to t and NONE,
+    FRESH or STALE."""
+    for j in prange(view.shape[0]):
+        for h in range(hist.shape[0]):
+            if arrive[h, j] <= t + TIME_EPS and hist[h, j, 5] > view[j, 5]:
+                for c in range(6):
+                    view[j, c] = hist[h, j, c]
+        if view[j, 5] == -math.inf:
+            out_seen[j, 0], out_seen[j, 1], out_seen[j, 2] = view[j, 0], view[j, 1], NONE
+        else:
+            x, y, stale = extrapolate(view[j, 0], view[j, 1], view[j, 2], view[j, 3],
+                                      view[j, 4], t - view[j, 5], staleness)
+            out_seen[j, 0], out_seen[j, 1] = x, y
+            out_seen[j, 2] = STALE if stale else FRESH
+
+
+def slip_update(step: int, period: float, seed: int, sigma: float, slip: np.ndarray) -> None:
+    """Advance each wheel's slip fraction ``slip`` (N, 2) one period: a first-order
+    Gauss-Markov process of standard deviation ``sigma`` and correlation time SLIP_TIME,
+    clipped to [-0.9, 0.9]."""
+    rho = math.exp(-period / SLIP_TIME)
+    gain = sigma * math.sqrt(1.0 - rho * rho)
+    for i in prange(slip.shape[0]):
+        for w in range(2):
+            s = rho * slip[i, w] + gain * normal(seed, SLIP, i, w, step)
+            slip[i, w] = min(max(s, -0.9), 0.9)
+
+
+def odometry(step: int, seed: int, noise: float, enc: np.ndarray, last_read: np.ndarray,
+             wheel_radius: float, wheel_base: float, est: np.ndarray) -> None:
+    """Each robot reads its encoders (true wheel turns ``enc`` (N, 2) [rev] plus noise of
+    standard deviation ``noise`` [rev]) and integrates the change since ``last_read`` into
+    its pose estimate ``est`` (N, 3) with :func:`agent.odometry.odometry_step`."""
+    for i in prange(enc.shape[0]):
+        right, left = enc[i, 0], enc[i, 1]
+        if noise > 0.0:
+            right += noise * normal(seed, ENCODER, i, 0, step)
+            left += noise * normal(seed, ENCODER, i, 1, step)
+        x, y, th = odometry_step(est[i, 0], est[i, 1], est[i, 2], right - last_read[i, 0],
+                                 left - last_read[i, 1], wheel_radius, wheel_base)
+        est[i, 0], est[i, 1], est[i, 2] = x, y, th
+        last_read[i, 0], last_read[i, 1] = right, left
+
+
+def detect(i: int, step: int, seed: int, noise: float, dropout: float, k: int,
+           o_x: np.ndarray, o_y: np.ndarray, o_r: np.ndarray, o_k: np.ndarray) -> int:
+    """Robot i's detections of the k obstacles it senses this period (centres, radii [m]
+    and indices in the first k entries): each missing with probability ``dropout``, the
+    others' centre coordinates and radius off by normal noise of standard deviation
+    ``noise`` [m] (radius at least 0). Compacts the arrays; returns how many remain."""
+    kept = 0
+    for q in range(k):
+        kk = o_k[q]
+        if dropout > 0.0 and uniform(seed, DROPOUT, i, kk, step) < dropout:
+            continue
+        x, y, r = o_x[q], o_y[q], o_r[q]
+        if noise > 0.0:
+            x += noise * normal(seed, DETECT, i, 3 * kk, step)
+            y += noise * normal(seed, DETECT, i, 3 * kk + 1, step)
+            r = max(r + noise * normal(seed, DETECT, i, 3 * kk + 2, step), 0.0)
+        o_x[kept], o_y[kept], o_r[kept], o_k[kept] = x, y, r, kk
+        kept += 1
+    return kept

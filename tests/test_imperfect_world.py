@@ -1,0 +1,185 @@
+"""The imperfect world of the batch simulator ([world]): each imperfection shows its effect,
+runs are reproducible from their seed, and bad values are refused by name."""
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common import drivers
+from firmware_sim import world_step
+from firmware_sim.batch import SimOptions, simulate
+from firmware_sim.plant import PlantKind
+from firmware_sim.world import Kill, WorldParams
+from hil.cli import main
+from hil.exit_codes import EXIT_BAD_INPUT, EXIT_OK
+from hil.robot_profile import load_robot_profile
+from hil.scenario import ScenarioError, load_scenario, parse_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = load_scenario(ROOT / "scenarios" / "paper.toml")
+CART = load_robot_profile(ROOT / "robots" / "cart.toml")
+
+
+def run(world=None, robot=None, plant=PlantKind.WHEELS, duration=20.0, record_every=0):
+    sc = PAPER
+    return simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control,
+                    robot or sc.robot,
+                    SimOptions(duration=duration, plant=plant, record_every=record_every),
+                    world=world)
+
+
+def summary(result):
+    return result.metrics.summary("paper", 20.0)
+
+
+def test_a_scenario_without_world_is_the_ideal_world():
+    assert PAPER.world == WorldParams() and PAPER.world.ideal
+    a = summary(run(None, plant=PlantKind.IDEAL))
+    b = summary(run(WorldParams(seed=9), plant=PlantKind.IDEAL))    # the seed alone: ideal
+    assert a == b
+    assert a["convergence_time"] == pytest.approx(7.32)
+    assert a["min_pair_distance"] == pytest.approx(1.9707, abs=1e-4)
+    assert a["max_pose_error"] == 0.0
+
+
+def test_link_delay_brings_robots_closer():
+    """The cart (3 m/s, 2 m/s^2) on the paper example: neighbour states 0.3 s old (then
+    extrapolated, as agents do) cost more than a metre of the closest approach."""
+    fresh = summary(run(WorldParams(), robot=CART))["min_pair_distance"]
+    late = summary(run(WorldParams(link_delay=0.3), robot=CART))["min_pair_distance"]
+    assert late < fresh - 1.0
+
+
+def test_a_killed_robot_stands_still_after_its_watchdog_and_braking():
+    at = 3.0
+    result = run(WorldParams(kill=(Kill(robot=3, at=at),)), robot=CART, duration=10.0,
+                 record_every=1)
+    i = int(np.flatnonzero(PAPER.ids == 3)[0])
+    speed = np.hypot(*np.diff(result.pose[:, i, :2], axis=0).T) / PAPER.control.period
+    t = result.t[1:]
+    assert speed[(t > at - 1.0) & (t <= at)].max() > 1.0              # moving when killed
+    stop = at + drivers.WATCHDOG + CART.drive_latency + CART.v_wheel_max / CART.a_max
+    assert speed[t > stop + 0.05].max() < 1e-9                        # then stands still
+    assert summary(result)["killed_robots"] == [3]
+
+
+def test_wheel_slip_makes_odometry_drift_from_truth():
+    slipping = summary(run(WorldParams(seed=1, wheel_slip=0.05)))
+    noisy = summary(run(WorldParams(seed=1, encoder_noise=0.001)))
+    assert slipping["max_pose_error"] > 1.0
+    assert 0.0 < noisy["max_pose_error"] < 0.5
+    assert summary(run(WorldParams(seed=1)))["max_pose_error"] == 0.0
+
+
+def test_a_world_is_reproducible_from_its_seed():
+    world = WorldParams(seed=4, link_delay=0.1, link_jitter=0.05, link_loss=0.2,
+                        loss_burst=3.0, wheel_slip=0.02, detection_noise=0.1)
+    a, b = summary(run(world, duration=6.0)), summary(run(world, duration=6.0))
+    c = summary(run(dataclasses.replace(world, seed=5), duration=6.0))
+    assert a == b
+    assert a != c
+
+
+def losses(loss, burst, steps=40_000, seed=2):
+    """The loss pattern of one robot's states over ``steps`` periods."""
+    hist, arrive = np.zeros((3, 1, 6)), np.zeros((3, 1))
+    bad, lost = np.zeros(1, np.int64), np.zeros(steps, bool)
+    est, cmd, alive = np.zeros((1, 3)), np.zeros((1, 3)), np.ones(1, bool)
+    for step in range(steps):
+        world_step.publish(step, 0.02, est, cmd, alive, seed, 0.0, 0.0, loss, burst, bad, hist,
+                           arrive)
+        lost[step] = math.isinf(arrive[step % 3, 0])
+    edges = np.flatnonzero(np.diff(np.r_[0, lost.astype(int), 0]))
+    runs = edges[1::2] - edges[::2]
+    return lost.mean(), runs.mean()
+
+
+@pytest.mark.parametrize("burst", [2.0, 5.0])
+def test_loss_bursts_have_the_configured_mean_length(burst):
+    fraction, mean_burst = losses(0.2, burst)
+    assert fraction == pytest.approx(0.2, abs=0.02)
+    assert mean_burst == pytest.approx(burst, rel=0.1)
+
+
+def test_independent_losses_are_not_bursty():
+    fraction, mean_burst = losses(0.2, 1.0)
+    assert fraction == pytest.approx(0.2, abs=0.02)
+    assert mean_burst == pytest.approx(1 / 0.8, rel=0.05)     # runs of a Bernoulli process
+
+
+def test_delivered_states_arrive_late_and_turn_stale():
+    """A robot moving at 1 m/s along x, its states 0.1 s late: the others see the newest
+    state that arrived, extrapolated to now; once it stops publishing, its last position,
+    stale after the staleness limit."""
+    T, delay = 0.02, 0.1
+    hist, arrive = np.zeros((8, 1, 6)), np.full((8, 1), np.inf)
+    view, seen = np.zeros((1, 6)), np.zeros((1, 3))
+    view[0, 5] = -np.inf
+    bad, cmd = np.zeros(1, np.int64), np.array([[1.0, 0.0, 0.0]])
+    for step in range(30):
+        t = step * T
+        world_step.deliver(t, hist, arrive, view, 0.5, seen)
+        if step < 5:
+            assert seen[0, 2] == world_step.NONE                      # nothing arrived yet
+        else:
+            assert view[0, 5] == pytest.approx(t - delay)             # the newest arrived
+            assert seen[0, :2] == pytest.approx([t, 0.0])             # extrapolated to now
+            assert seen[0, 2] == world_step.FRESH
+        world_step.publish(step, T, np.array([[t, 0.0, 0.0]]), cmd, np.ones(1, bool), 0,
+                           delay, 0.0, 0.0, 1.0, bad, hist, arrive)
+    last = view[0, 5]
+    for step in range(30, 80):                                        # dead: nothing sent
+        world_step.publish(step, T, np.zeros((1, 3)), cmd, np.zeros(1, bool), 0, delay, 0.0,
+                           0.0, 1.0, bad, hist, arrive)
+        world_step.deliver(step * T, hist, arrive, view, 0.5, seen)
+    assert view[0, 5] == pytest.approx(29 * T)
+    assert last < view[0, 5]
+    assert seen[0, 2] == world_step.STALE and seen[0, 0] == pytest.approx(29 * T)
+
+
+def test_detections_drop_out_and_scatter():
+    noise, dropout, steps = 0.2, 0.3, 4000
+    kept, dx = 0, []
+    for step in range(steps):
+        o_x, o_y, o_r = np.array([5.0]), np.array([0.0]), np.array([2.0])
+        o_k = np.array([0])
+        if world_step.detect(7, step, 3, noise, dropout, 1, o_x, o_y, o_r, o_k):
+            kept += 1
+            dx.append(o_x[0] - 5.0)
+    assert kept / steps == pytest.approx(1 - dropout, abs=0.03)
+    assert np.std(dx) == pytest.approx(noise, rel=0.1)
+
+
+def _doc(world):
+    doc = {"name": "w", "duration": 1.0, "robots": [{"id": 1, "pose": [0, 0, 0]},
+                                                      {"id": 2, "pose": [5, 0, 0]}]}
+    doc["world"] = world
+    return doc
+
+
+@pytest.mark.parametrize("world, named", [
+    ({"link_loss": 2.0}, "WorldParams.link_loss"),
+    ({"link_delay": "fast"}, "WorldParams.link_delay"),
+    ({"lag": 1.0}, "unknown field(s) lag"),
+    ({"kill": [{"robot": 9, "at": 1.0}]}, "[world.kill][0].robot"),
+    ({"kill": [{"robot": 1}]}, "[world.kill][0]: Kill.at: missing"),
+    ({"link_loss": 0.5, "loss_burst": 0.5}, "WorldParams.loss_burst"),
+])
+def test_bad_world_values_are_refused_by_name(world, named):
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(_doc(world), "s.toml")
+    assert "s.toml" in str(err.value) and named in str(err.value)
+
+
+def test_sim_takes_the_wheels_plant_for_odometry(tmp_path, capsys):
+    scenario = tmp_path / "slip.toml"
+    scenario.write_text((ROOT / "scenarios" / "paper.toml").read_text()
+                        + "\n[world]\nwheel_slip = 0.01\n")
+    assert main(["sim", str(scenario), "--out", str(tmp_path / "run"), "--duration", "1",
+                 "--record-every", "0"]) == EXIT_OK
+    assert '"plant": "wheels"' in (tmp_path / "run" / "metrics.json").read_text()
+    assert main(["sim", str(scenario), "--out", str(tmp_path / "run2"), "--plant", "ideal",
+                 "--duration", "1"]) == EXIT_BAD_INPUT
+    assert "wheel slip" in capsys.readouterr().err
