@@ -326,14 +326,24 @@ def _run(todo: list[Run], folder: Path, console: Console, workers: int | None,
 
 # --- parquet ----------------------------------------------------------------------------
 def arrow_table(rows: list[dict[str, Any]]) -> Any:
-    """The rows as an Arrow table: one column per key (in order of first appearance),
-    typed by its values: bool, int64, float64 (ints and floats), string, or JSON text (lists,
-    objects, mixed); missing values null."""
+    """The rows as an Arrow table: one column per key (identity and spec columns first, then
+    in order of first appearance), typed by its values: bool, int64, float64 (ints and
+    floats), string, or JSON text (lists, objects, mixed); missing values null."""
     import pyarrow as pa
     names: dict[str, None] = {}
     for row in rows:
         names.update(dict.fromkeys(row))
-    return pa.table({n: _column([row.get(n) for row in rows]) for n in names})
+    order = sorted(names, key=_rank)            # stable: first appearance within a rank
+    return pa.table({n: _column([row.get(n) for row in rows]) for n in order})
+
+
+RANKS = ("key", "status", "error", "family_", "micro", "seed", "profile", "world_", "kill",
+         "control_")
+
+
+def _rank(name: str) -> int:
+    """Identity first, then the spec's columns in the spec's order, then the results."""
+    return next((i for i, p in enumerate(RANKS) if name.startswith(p)), len(RANKS))
 
 
 def _column(values: list[Any]) -> Any:

@@ -112,12 +112,13 @@ def _table(first: str, groups: list[tuple[str, Group]]) -> list[str]:
     return lines
 
 
-def _describe(row: dict[str, Any]) -> str:
-    parts = [f"{k.split('_', 1)[1] if k.startswith(DIMENSION_PREFIXES) else k}="
-             f"{_label(row[k])}" for k in row
-             if (k.startswith(DIMENSION_PREFIXES) or k in (*DIMENSIONS, "seed"))
-             and k not in NOT_DIMENSIONS and row[k] is not None and row[k] is not False]
-    return " ".join(parts)
+def _describe(row: dict[str, Any], dims: Sequence[str]) -> str:
+    """The run's scenario (family keys or micro case, seed), profile and swept values."""
+    shown = [k for k in row if k.startswith("family_") or k in ("micro", "seed", "profile")
+             or k in dims]
+    return " ".join(f"{k.split('_', 1)[1] if k.startswith(DIMENSION_PREFIXES) else k}="
+                    f"{_label(row[k])}" for k in shown
+                    if row[k] is not None and row[k] is not False)
 
 
 def replay_command(folder: Path, key: str) -> str:
@@ -127,14 +128,14 @@ def replay_command(folder: Path, key: str) -> str:
 
 
 def _worst(title: str, rows: list[dict[str, Any]], value: str, folder: Path,
-           extra: Sequence[str] = ()) -> list[str]:
+           dims: Sequence[str], extra: Sequence[str] = ()) -> list[str]:
     if not rows:
         return []
     lines = ["", f"### {title}", ""]
     for r in rows:
         facts = [f"{k} = {_label(r.get(k))}" for k in (value, *extra)
                  if r.get(k) is not None]
-        lines += [f"- `{r['key']}` {r.get('scenario') or ''} ({_describe(r)}): "
+        lines += [f"- `{r['key']}` {r.get('scenario') or ''} ({_describe(r, dims)}): "
                   f"{', '.join(facts)}",
                   f"  `{replay_command(folder, r['key'])}`"]
     return lines
@@ -180,14 +181,15 @@ def write_report(name: str, rows: list[dict[str, Any]], folder: Path, total: int
     stuck = sorted((r for r in ok if not r.get("converged")),
                    key=lambda r: (-(r.get("final_max_tracking_error") or 0.0), r["key"]))
     failed = [r for r in rows if r.get("status") == "failed"]
-    lines += _worst("Closest pairs", by_d, "min_pair_distance", folder,
+    lines += _worst("Closest pairs", by_d, "min_pair_distance", folder, dims,
                     ("min_pair_time", "worst_pair", "a"))
-    lines += _worst("Smallest clearances", by_c, "min_obstacle_clearance", folder,
+    lines += _worst("Smallest clearances", by_c, "min_obstacle_clearance", folder, dims,
                     ("min_clearance_time", "worst_clearance_robot", "a"))
     lines += _worst(f"Not converged ({len(stuck)}; the {min(len(stuck), 2 * WORST)} farthest "
                     f"from their references)", stuck[:2 * WORST],
-                    "final_max_tracking_error", folder, ("stuck_robots", "deadlock"))
-    lines += _worst(f"Failed ({len(failed)})", failed[:2 * WORST], "error", folder)
+                    "final_max_tracking_error", folder, dims,
+                    ("stuck_robots", "deadlocked_robots", "killed_robots"))
+    lines += _worst(f"Failed ({len(failed)})", failed[:2 * WORST], "error", folder, dims)
     out = folder / REPORT
     out.write_text("\n".join(lines) + "\n")
     return out

@@ -96,14 +96,15 @@ def _simulate(desc: Mapping[str, Any], key: str) -> dict[str, Any]:
     from hil.scenario import parse_scenario
     doc = scenario_doc(desc)
     sc = parse_scenario(doc, f"run {key}")
+    # as sim: a world with wheel slip or encoder noise needs the wheels plant
+    plant = PlantKind.WHEELS if sc.world.odometry else sc.plant
     options = SimOptions(duration=sc.duration, sensing_range=sc.sensing_range,
-                         substeps=sc.substeps, plant=sc.plant, record_every=0)
-    extra = {"world": sc.world} if hasattr(sc, "world") else {}
+                         substeps=sc.substeps, plant=plant, record_every=0)
     result = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
-                      options, **extra)
+                      options, world=sc.world)
     metrics = result.metrics.summary(sc.name, options.duration)
     kill = (doc.get("world") or {}).get("kill") or [{}]
-    wheels = sc.plant is PlantKind.WHEELS
+    wheels = plant is PlantKind.WHEELS
     out: dict[str, Any] = {
         "kill_robot": kill[0].get("robot"), "kill_time": kill[0].get("at"),
         "a": sc.control.a, "safe": is_safe(metrics, sc.control.a),
@@ -123,14 +124,15 @@ def run_timed(desc: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
 
 
 def warm_up() -> float:
-    """Load (or compile) the batch simulator's kernels in this process with a two-robot run
-    of two periods on each plant; returns the seconds it took."""
+    """Load (or compile) the batch simulator's kernels in this process: two robots for a few
+    periods in the ideal world and in one with every imperfection (a kill too), on each
+    plant; returns the seconds it took."""
     from agent.config import RobotParams
     from agent.formation import Formation
     from firmware_sim import compiled
     from firmware_sim.batch import SimOptions, simulate
     from firmware_sim.plant import PlantKind
-    from firmware_sim.world import Obstacles
+    from firmware_sim.world import Kill, Obstacles, WorldParams
     started = time.perf_counter()
     if not compiled.available():
         return 0.0
@@ -138,7 +140,15 @@ def warm_up() -> float:
     formation = Formation(np.array([[0.0, -5.0], [0.0, 5.0]]), (0.0, 0.0), (1.0, 0.0))
     obstacles = Obstacles(np.array([[20.0, 0.0]]), np.array([1.0]))
     poses = np.array([[-5.0, -5.0, 0.0], [-5.0, 5.0, math.pi]])
-    for plant in PlantKind:
+    link: dict[str, Any] = {"link_delay": 0.05, "link_jitter": 0.01, "link_loss": 0.2,
+                            "loss_burst": 2.0, "detection_noise": 0.01,
+                            "detection_dropout": 0.1,
+                            "kill": (Kill(robot=2, at=2 * control.period),)}
+    worlds = ((PlantKind.IDEAL, WorldParams()), (PlantKind.IDEAL, WorldParams(**link)),
+              (PlantKind.WHEELS, WorldParams()),
+              (PlantKind.WHEELS, WorldParams(wheel_slip=0.02, encoder_noise=0.001, **link)))
+    for plant, world in worlds:
         simulate(np.array([1, 2]), poses, formation, obstacles, control, RobotParams(),
-                 SimOptions(duration=2 * control.period, plant=plant, record_every=0))
+                 SimOptions(duration=5 * control.period, plant=plant, record_every=0),
+                 world=world)
     return time.perf_counter() - started
