@@ -2,7 +2,6 @@
 processes), the report and the replay of a run."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import re
@@ -21,8 +20,6 @@ from hil.cli import main
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = ROOT / "campaigns" / "smoke.toml"
 REALISTIC = ROOT / "campaigns" / "realistic.toml"
-STANDIN = Path(__file__).resolve().parent / "families_standin.py"
-WORLD = "world" in __import__("hil.scenario", fromlist=["TOP_KEYS"]).TOP_KEYS
 
 TINY = """
 name = "tiny"
@@ -38,36 +35,17 @@ micro = ["head_on_swap"]
 """
 
 
-# --- scenario families: hil.families, or the stand-in until it lands ----------------------
 @pytest.fixture(scope="module")
-def families(tmp_path_factory):
-    """hil.families for this process and for every process it starts (Dask workers): the
-    real module when it exists, else tests/families_standin.py (installed in subprocesses
-    by a sitecustomize on PYTHONPATH). Yields the environment for subprocesses."""
+def families():
+    """The environment of the processes a test starts (Dask workers): this checkout first
+    on PYTHONPATH, so that they run this code (hil.families among it)."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
-    if importlib.util.find_spec("hil.families") is not None:
-        yield env
-        return
-    site = tmp_path_factory.mktemp("standin")
-    (site / "sitecustomize.py").write_text(
-        "import importlib.util, sys\n"
-        f"spec = importlib.util.spec_from_file_location('hil.families', {str(STANDIN)!r})\n"
-        "module = importlib.util.module_from_spec(spec)\n"
-        "sys.modules['hil.families'] = module\n"
-        "spec.loader.exec_module(module)\n")
-    env["PYTHONPATH"] = os.pathsep.join([str(site), env["PYTHONPATH"]])
-    spec = importlib.util.spec_from_file_location("hil.families", STANDIN)
-    assert spec and spec.loader
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
     saved = os.environ.get("PYTHONPATH")
-    sys.modules["hil.families"] = module
-    os.environ["PYTHONPATH"] = env["PYTHONPATH"]
+    os.environ["PYTHONPATH"] = env["PYTHONPATH"]        # LocalCluster workers inherit it
     try:
         yield env
     finally:
-        del sys.modules["hil.families"]
         if saved is None:
             os.environ.pop("PYTHONPATH", None)
         else:
@@ -218,14 +196,15 @@ def test_a_bad_spec_exits_2_and_names_the_field(tmp_path, families, capsys):
 
 
 # --- rows and tables ------------------------------------------------------------------------
-def test_a_run_that_raises_is_a_failed_row(families, monkeypatch):
+def test_a_run_that_raises_is_a_failed_row(monkeypatch):
+    from hil import families
     from hil.campaign_run import run_one
     desc = {"family": {"kind": "line", "robots": 5}, "seed": 0, "duration": 5.0,
             "profile": "none", "robot": None, "control": {}}
 
     def broken(*args, **kwargs):
         raise ValueError("no room\nfor the robots")
-    monkeypatch.setattr(sys.modules["hil.families"], "family_doc", broken)
+    monkeypatch.setattr(families, "family_doc", broken)
     row = run_one(desc)
     assert row["status"] == "failed" and row["error"] == "ValueError: no room for the robots"
     assert row["family_kind"] == "line" and row["seed"] == 0 and "converged" not in row
@@ -335,8 +314,6 @@ def test_an_unreachable_scheduler_exits_1_and_a_malformed_one_2(tmp_path, famili
 @pytest.fixture(scope="module")
 def smoke_local(tmp_path_factory, families):
     """campaigns/smoke.toml on a local cluster of 2 workers."""
-    if not WORLD:
-        pytest.skip("the smoke campaign has world settings: needs [world] in scenarios")
     out = tmp_path_factory.mktemp("smoke") / "local"
     started = time.monotonic()
     code = main(["campaign", str(SMOKE), "--out", str(out), "--workers", "2"])
