@@ -148,6 +148,27 @@ def _locked(folder: Path) -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Ctrl-C and SIGTERM take effect when the block is done (main thread only)."""
+    got: list[int] = []
+
+    def note(signum: int, frame: Any) -> None:
+        got.append(signum)
+    try:
+        previous = {s: signal.signal(s, note) for s in (signal.SIGINT, signal.SIGTERM)}
+    except ValueError:                       # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if got:
+            raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
 def _sigterm_interrupts() -> Iterator[None]:
     """SIGTERM stops the campaign as Ctrl-C does (the cluster is closed on the way out)."""
     def handler(signum: int, frame: Any) -> None:
@@ -311,8 +332,9 @@ def _run(todo: list[Run], folder: Path, console: Console, workers: int | None,
         try:
             with count_progress(console, f"campaign {name}", len(todo)) as advance:
                 def on_row(row: dict[str, Any], timing: dict[str, Any]) -> None:
-                    rows.write(row)
-                    timings.write(timing)
+                    with _signals_deferred():       # a row and its timing, or neither
+                        rows.write(row)
+                        timings.write(timing)
                     done[row["key"]] = row
                     outcome.executed += 1
                     advance(row.get("status") == "failed")

@@ -46,7 +46,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         return replay(args, console)
     from hil import campaign
     from hil.campaign_report import write_report
-    from hil.campaign_spec import check_world, load_spec
+    from hil.campaign_spec import load_spec
     source = Path(args.spec)
     if args.out:
         out = Path(args.out)
@@ -59,7 +59,6 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if not campaign.dask_available():
         raise RuntimeError("Dask is not installed: pip install 'boundswarm[campaign]'")
     spec = load_spec(source)
-    check_world(spec)
     outcome = campaign.run_campaign(spec, out, console, workers=args.workers,
                                     scheduler=args.scheduler, retry_failed=args.retry_failed)
     report = write_report(spec.name, outcome.rows, out, outcome.total)

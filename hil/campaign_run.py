@@ -116,10 +116,12 @@ def _simulate(desc: Mapping[str, Any], key: str) -> dict[str, Any]:
 
 
 def run_timed(desc: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """:func:`run_one` and its timing (wall seconds, host, process): what workers run."""
-    started = time.perf_counter()
+    """:func:`run_one` and its timing (wall and CPU seconds, host, process): what workers
+    run."""
+    started, cpu = time.perf_counter(), time.process_time()
     row = run_one(desc)
     return row, {"key": row["key"], "seconds": round(time.perf_counter() - started, 4),
+                 "cpu_seconds": round(time.process_time() - cpu, 4),
                  "host": socket.gethostname(), "pid": os.getpid()}
 
 

@@ -118,6 +118,7 @@ def parse_spec(doc: dict[str, Any], where: str, base: Path, source: Path | None 
     profiles = _profiles(rd, doc.get("profiles", [NO_PROFILE]), base)
     blocks = rd.array_of_tables(doc, "family", required=True)
     world_combos, kill_share, kill_at = _world(rd, rd.table(doc, "world"))
+    _check_worlds(world_combos, kill_share, kill_at, where)
     control_combos = _control(rd, rd.table(doc, "control"), where)
 
     runs: dict[str, Run] = {}
@@ -125,12 +126,13 @@ def parse_spec(doc: dict[str, Any], where: str, base: Path, source: Path | None 
     for i, block in enumerate(blocks):
         cases, block_duration = _block(rd, block, f"family[{i}]", duration)
         if check_families:
-            checked += _check_cases(cases, f"{where}: family[{i}]", block_duration)
+            checked += _check_cases(cases, f"{where}: family[{i}]", block_duration,
+                                    control_combos)
         for case in cases:
             for seed in seeds:
                 world_seed = derived_seed("world", seed, case)
                 killed = bool(np.random.default_rng([world_seed, 1]).random() < kill_share)
-                for (profile, _, robot), world, control in itertools.product(
+                for (profile, _, robot), world, (control, _) in itertools.product(
                         profiles, world_combos, control_combos):
                     desc: dict[str, Any] = {**case, "seed": seed, "duration": block_duration,
                                             "profile": profile, "robot": robot,
@@ -245,23 +247,25 @@ def _block(rd: TableReader, block: Mapping[str, Any], where: str, duration: floa
         duration
 
 
-def _check_cases(cases: Iterable[Mapping[str, Any]], where: str, duration: float | None
-                 ) -> int:
-    """Generate each family case once (seed 0): a value the generator refuses is a spec
-    error. Micro cases were checked by name."""
+def _check_cases(cases: Iterable[Mapping[str, Any]], where: str, duration: float | None,
+                 controls: list[tuple[dict[str, Any], ControlParams]]) -> int:
+    """Generate each family case once (seed 0) with each controller setting: a value the
+    generator refuses is a spec error. Micro cases were checked by name."""
     families = None
     count = 0
-    for case in cases:
+    for case, (overrides, control) in itertools.product(cases, controls):
         if "family" not in case:
             continue
         families = families or families_module()
         kwargs = {} if duration is None else {"duration": duration}
+        place = where + ("".join(f" ([control] {k} = {v!r})" for k, v in overrides.items())
+                         if len(controls) > 1 else "")
         try:
-            families.family_doc(case["family"], 0, where=where, **kwargs)
+            families.family_doc(case["family"], 0, control=control, where=place, **kwargs)
         except ScenarioError:
             raise
         except (ConfigError, ValueError, KeyError, TypeError) as exc:
-            raise ScenarioError(f"{where}: {exc}") from None
+            raise ScenarioError(f"{place}: {exc}") from None
         count += 1
     return count
 
@@ -294,8 +298,25 @@ def _world(rd: TableReader, table: Mapping[str, Any]
     return combos, share, kill_at
 
 
-def _control(rd: TableReader, table: Mapping[str, Any], where: str) -> list[dict[str, Any]]:
-    """The crossed controller overrides, each checked as a whole ControlParams."""
+def _check_worlds(combos: list[dict[str, float]], kill_share: float,
+                  kill_at: tuple[float, float], where: str) -> None:
+    """Check each world combination as a scenario's [world] (with a kill when there are
+    kills)."""
+    from hil.scenario import parse_scenario
+    for world in combos:
+        table: dict[str, Any] = dict(world)
+        if not table and kill_share == 0:
+            continue
+        if kill_share > 0:
+            table["kill"] = [{"robot": 1, "at": kill_at[0]}]
+        parse_scenario({"name": "world", "duration": 1.0, "formation": {"kind": "line"},
+                        "robots": [{"id": 1, "pose": [0.0, 0.0, 0.0]}], "world": table},
+                       where)
+
+
+def _control(rd: TableReader, table: Mapping[str, Any], where: str
+             ) -> list[tuple[dict[str, Any], ControlParams]]:
+    """The crossed controller overrides, each with the whole ControlParams it makes."""
     allowed = {f.key: f for f in fields(ControlParams)}
     rd.only(table, set(allowed), "[control]")
     keys = [k for k in allowed if k in table]
@@ -307,7 +328,7 @@ def _control(rd: TableReader, table: Mapping[str, Any], where: str) -> list[dict
             params = from_table(ControlParams, overrides, f"{where} [control]")
         except ConfigError as exc:
             raise ScenarioError(str(exc)) from None
-        combos.append({k: getattr(params, allowed[k].name) for k in keys})
+        combos.append(({k: getattr(params, allowed[k].name) for k in keys}, params))
     return combos
 
 
@@ -340,23 +361,3 @@ def write_copy(spec: CampaignSpec, folder: Path) -> Path:
         tmp.replace(out)
     return out
 
-
-def check_world(spec: CampaignSpec) -> None:
-    """Refuse world settings that this version's scenarios cannot hold; check each distinct
-    world table as a scenario's [world] (naming the spec file)."""
-    from hil import scenario
-    worlds = {json.dumps([r.description["world"], r.description.get("kill_at")],
-                         sort_keys=True) for r in spec.runs if "world" in r.description}
-    if not worlds:
-        return
-    where = str(spec.source or spec.name)
-    if "world" not in scenario.TOP_KEYS:
-        raise ScenarioError(f"{where}: [world]: the scenarios of this version have no [world] "
-                            f"table (no imperfect world to simulate)")
-    for text in sorted(worlds):
-        world, kill_at = json.loads(text)
-        if kill_at:
-            world["kill"] = [{"robot": 1, "at": kill_at[0]}]
-        doc = {"name": "world", "duration": 1.0, "formation": {"kind": "line"},
-               "robots": [{"id": 1, "pose": [0.0, 0.0, 0.0]}], "world": world}
-        scenario.parse_scenario(doc, where)
