@@ -95,15 +95,15 @@ def code_digest(root: Path | None = None) -> str:
 
 
 # --- the folder -------------------------------------------------------------------------
-def read_rows(folder: Path) -> dict[str, dict[str, Any]]:
-    """The rows of ``folder/runs.jsonl`` by key; a torn last line (a campaign killed while
-    writing it) is cut off the file."""
+def read_rows(folder: Path, repair: bool = False) -> dict[str, dict[str, Any]]:
+    """The rows of ``folder/runs.jsonl`` by key, without a torn last line (a campaign killed
+    while writing it); ``repair``: cut that line off the file (before appending to it)."""
     path = folder / RUNS
     if not path.exists():
         return {}
     data = path.read_bytes()
     end = data.rfind(b"\n") + 1
-    if end < len(data):
+    if repair and end < len(data):
         with path.open("r+b") as f:
             f.truncate(end)
     rows = {}
@@ -272,7 +272,7 @@ def run_campaign(spec: CampaignSpec, folder: Path, console: Console,
     folder.mkdir(parents=True, exist_ok=True)
     with _locked(folder), _sigterm_interrupts():
         write_copy(spec, folder)
-        done = read_rows(folder)
+        done = read_rows(folder, repair=True)
         todo = [r for r in spec.runs if r.key not in done
                 or (retry_failed and done[r.key].get("status") == "failed")]
         outcome = Outcome(rows=[], total=len(spec.runs))
@@ -304,7 +304,11 @@ def _warn_other_code(folder: Path, code: str, reused: int, console: Console) -> 
     path = folder / SESSIONS
     if not reused or not path.exists():
         return
-    codes = {json.loads(line).get("code") for line in path.read_text().splitlines() if line}
+    codes = set()
+    for line in path.read_text().splitlines():
+        with contextlib.suppress(ValueError, AttributeError):
+            codes.add(json.loads(line).get("code"))
+    codes.discard(None)
     if codes - {code}:
         console.print(f"[yellow]note: {reused} rows in {folder} were computed by other "
                       f"sources of the simulator (code {', '.join(sorted(codes - {code}))}, "
@@ -317,11 +321,15 @@ def _run(todo: list[Run], folder: Path, console: Console, workers: int | None,
     from hil.console import count_progress
     started = time.perf_counter()
     with dask_client(workers, scheduler) as client:
-        threads = sum(w.get("nthreads", 1)
-                      for w in client.scheduler_info()["workers"].values())
-        outcome.workers = len(client.scheduler_info()["workers"])
-        if not threads:
-            raise CampaignError(f"the Dask cluster at {scheduler} has no workers")
+        if scheduler and not client.scheduler_info()["workers"]:
+            try:
+                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+            except TimeoutError:
+                raise CampaignError(f"the Dask scheduler at {scheduler} has no workers "
+                                    f"(waited {CONNECT_TIMEOUT:g} s)") from None
+        workers_info = client.scheduler_info()["workers"]
+        threads = sum(w.get("nthreads", 1) for w in workers_info.values())
+        outcome.workers = len(workers_info)
         warm = _warm_up(client)
         outcome.startup_seconds = time.perf_counter() - started
         console.print(f"campaign {name}: {len(todo)} runs to do on {outcome.workers} "

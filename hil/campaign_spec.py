@@ -338,6 +338,9 @@ def write_copy(spec: CampaignSpec, folder: Path) -> Path:
     ``folder/profiles/``: the folder alone then resumes the campaign and replays its runs
     (the copy expands to the same runs, with the same keys)."""
     folder.mkdir(parents=True, exist_ok=True)
+    out = folder / SPEC_COPY
+    if spec.source is not None and spec.source.resolve() == out.resolve():
+        return out                                  # resumed from the copy itself
     doc = dict(spec.doc)
     if spec.profiles:
         names = []
@@ -354,7 +357,6 @@ def write_copy(spec: CampaignSpec, folder: Path) -> Path:
     where = f" (from {spec.source})" if spec.source else ""
     text = (f"# The spec of campaign {spec.name!r}{where}, written by boundswarm campaign;\n"
             f"# its robot profiles are copied into {PROFILES_DIR}/.\n" + toml_text.dumps(doc))
-    out = folder / SPEC_COPY
     if not out.exists() or out.read_text() != text:
         tmp = out.with_suffix(".tmp")
         tmp.write_text(text)

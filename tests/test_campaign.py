@@ -374,6 +374,12 @@ def test_smoke_report_has_groups_and_intervals_and_its_replay_writes_a_run_folde
                    "min_obstacle_clearance", "convergence_time", "stuck_robots"):
         assert column in table.column_names, column
     assert "seconds" not in table.column_names
+    # the world reached the simulator: each kill within the run is in its killed robots
+    rows = rows_of(smoke_local)
+    killed = [r for r in rows if r["kill"] and r["kill_time"] <= r["duration"]]
+    assert killed and all(r["killed_robots"] == [r["kill_robot"]] for r in killed)
+    assert all(r["killed_robots"] == [] for r in rows if not r["kill"])
+    assert {r["world_link_delay"] for r in rows} == {0.0, 0.2}
     report = (smoke_local / "report.md").read_text()
     for group in ("## Overall", "## By family_kind", "## By micro", "## By profile",
                   "## By world_link_delay", "## By kill", "## Worst runs"):
