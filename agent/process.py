@@ -5,6 +5,10 @@ validated settings (the robot's CAN bus with its two ODrive drivers, a Zenoh ses
 MAVLink link with the parameter table it serves, runs the agent's fixed-period loop until
 SIGINT/SIGTERM, then shuts down cleanly: zero velocity, drivers IDLE, liveliness token
 dropped, bus and session closed. Loop and agent statistics are written as JSON when asked.
+
+SIMULATION ONLY: with an ``[impairment]`` section (written by ``boundswarm sitl`` alone),
+the Zenoh port is wrapped in :class:`agent.impairment.ImpairedSwarm` and a CRITICAL line
+says so at start.
 """
 from __future__ import annotations
 
@@ -16,10 +20,12 @@ import time
 from pathlib import Path
 
 from agent.config import CONTROL_PARAMS
+from agent.impairment import ImpairedSwarm
 from agent.loop import FixedRateLoop, SystemClock, use_normal_scheduling, use_realtime
 from agent.node import Agent
 from agent.settings import AgentSettings
 from agent.systemd import Notifier
+from common.ports import SwarmPort
 from common.vocabulary import AgentMode
 from transport.canbus import open_bus
 from transport.mavlink_link import VehicleState, open_link
@@ -85,7 +91,14 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
                           # the near-set thread takes the interpreter lock the loop needs:
                           # scheduled as the loop, it is never starved while holding it
                           thread_setup=(lambda: use_realtime(rt)) if rt > 0 else None)
-        agent = Agent(s, motor, swarm, clock)
+        port: SwarmPort = swarm
+        impaired = None
+        if s.impairment is not None:
+            port = impaired = ImpairedSwarm(swarm, s.robot_id, s.impairment, clock.wall)
+            log.critical("robot %d: SIMULATION ONLY: neighbour states pass an impaired link "
+                         "(%s); a real robot's config has no [impairment] section",
+                         s.robot_id, s.impairment.describe())
+        agent = Agent(s, motor, port, clock)
         link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
                          clock.wall, params=CONTROL_PARAMS)
         realtime = rt > 0 and use_realtime(rt)
@@ -123,6 +136,8 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
                  "can": {"sent": motor.sent, "ignored": dict(motor.ignored)},
                  "mavlink": link.counter_summary(),
                  "failsafe": agent.failsafe, "realtime": realtime}
+        if impaired is not None:
+            stats["impairment"] = impaired.counters()
         if stats_path is not None:
             stats_path.write_text(json.dumps(stats, indent=2) + "\n")
         return stats

@@ -15,6 +15,9 @@
     [mavlink]                       # transport.settings.MavlinkSettings
     [timeouts]                      # TimeoutSettings: feedback, staleness, arm
     [sensing]                       # SensingSettings: range
+    [impairment]                    # SIMULATION ONLY, written by `boundswarm sitl`:
+                                    # agent.impairment.ImpairmentSettings; refused unless
+                                    # the CAN bus is emulated (udp_multicast, virtual, vcan*)
 
 Every section is a frozen dataclass of the schema (common.schema), which reads, validates and
 writes the file (``to_toml``); every problem raises :class:`common.schema.ConfigError` naming
@@ -28,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agent.config import ControlParams, RobotParams
+from agent.impairment import ImpairmentSettings
 from common.schema import ConfigError, from_table, load_toml, section, setting, validate
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 
@@ -76,9 +80,17 @@ class AgentSettings:
     timeouts: TimeoutSettings = section(TimeoutSettings, "timeouts")
     sensing: SensingSettings = section(SensingSettings, "sensing")
     mavlink: MavlinkSettings = section(MavlinkSettings, "the MAVLink link")
+    impairment: ImpairmentSettings | None = section(
+        ImpairmentSettings, "SIMULATION ONLY: impaired neighbour link (boundswarm sitl)",
+        optional=True)
 
     def __post_init__(self) -> None:
         validate(self)
+        if self.impairment is not None and not emulated_can(self.can):
+            raise ConfigError(f"[impairment] is for simulation only (boundswarm sitl writes "
+                              f"it): refused with the CAN bus {self.can.interface} "
+                              f"{self.can.channel}, which is not an emulated one "
+                              f"(udp_multicast, virtual, socketcan vcan*)")
         if self.sensing.range is None:          # fixed at start: 2 c of the config's control
             object.__setattr__(self, "sensing", SensingSettings(2.0 * self.control.c))
         if any(ch in self.swarm for ch in "/*$?#"):
@@ -96,6 +108,13 @@ class AgentSettings:
         the configured controller when absent)."""
         r = self.sensing.range
         return r if r is not None else 2.0 * self.control.c
+
+
+def emulated_can(can: CanSettings) -> bool:
+    """Whether ``can`` is a bus that only emulated drivers are on (the SITL's): udp_multicast,
+    python-can's virtual bus or a SocketCAN vcan interface."""
+    return can.interface in ("udp_multicast", "virtual") or (
+        can.interface == "socketcan" and can.channel.startswith("vcan"))
 
 
 def near_radius_problem(near_radius: float, sensing_range: float) -> str | None:

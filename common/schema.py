@@ -15,7 +15,8 @@ that one declaration this module derives, for any section:
 
 Supported field types: ``float``, ``int``, ``bool``, ``str``, ``tuple[str, ...]``,
 ``tuple[float, float, ...]`` (fixed length), ``X | None`` of these (None: absent from the
-file), nested sections (:func:`section`) and arrays of them (:func:`tables`). Errors are
+file), nested sections (:func:`section`; optional ones are None unless their table is in the
+file, and have no command-line flags) and arrays of them (:func:`tables`). Errors are
 :class:`ConfigError`, formatted
 ``<place>: <Section>.<key>: <problem>`` (the place: a file and its table).
 """
@@ -60,10 +61,14 @@ def setting(default: Any = MISSING, *, doc: str, unit: str = "", lo: float | Non
     return dataclasses.field(default=default, metadata=meta)
 
 
-def section(cls: Callable[[], Any], doc: str, key: str | None = None) -> Any:
-    """A field holding a nested section (a TOML table), by default ``cls()``."""
-    return dataclasses.field(default_factory=cls, metadata={"doc": doc, "key": key,
-                                                            "section": True})
+def section(cls: Callable[[], Any], doc: str, key: str | None = None,
+            optional: bool = False) -> Any:
+    """A field holding a nested section (a TOML table), by default ``cls()``; ``optional``
+    (annotation ``Section | None``): None unless the file has the table."""
+    meta = {"doc": doc, "key": key, "section": True}
+    if optional:
+        return dataclasses.field(default=None, metadata=meta)
+    return dataclasses.field(default_factory=cls, metadata=meta)
 
 
 def tables(doc: str, key: str | None = None) -> Any:
@@ -247,7 +252,8 @@ def from_table(cls: type[T], table: Mapping[str, Any], where: str) -> T:
     values: dict[str, Any] = {}
     for f in infos:
         if f.is_section:
-            values[f.name] = from_table(f.type, table.get(f.key, {}), _place(where, f.key))
+            if f.key in table or not f.optional:
+                values[f.name] = from_table(f.type, table.get(f.key, {}), _place(where, f.key))
         elif f.is_tables and f.key in table:
             values[f.name] = _tables_from_toml(f, table[f.key], where)
         elif f.key in table:
@@ -382,9 +388,9 @@ def to_toml(obj: Any, table: str = "") -> str:
     text = "\n".join(lines)
     for f in fields(type(obj)):
         name = f"{table}.{f.key}" if table else f.key
-        subs = ([to_toml(getattr(obj, f.name), name)] if f.is_section else
-                [f"[[{name}]]\n" + to_toml(x) for x in getattr(obj, f.name)]
-                if f.is_tables else [])
+        value = getattr(obj, f.name)
+        subs = ([to_toml(value, name)] if f.is_section and value is not None else
+                [f"[[{name}]]\n" + to_toml(x) for x in value] if f.is_tables else [])
         for sub in subs:
             if sub:
                 text += ("\n\n" if text else "") + sub.rstrip("\n")
@@ -402,10 +408,10 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
     ``--<prefix><section>-<key>``), with the field's type, default and a help text that
     gives the unit and default; read them back with :func:`section_from_args`."""
     for f in fields(cls):
+        if f.is_tables or (f.is_section and f.optional):     # no flags: files only
+            continue
         if f.is_section:
             add_arguments(parser, f.type, f"{prefix}{f.key}-")
-            continue
-        if f.is_tables:          # arrays of tables have no flags: files only
             continue
         flag = "--" + (prefix + f.key).replace("_", "-")
         unit = f" [{f.unit}]" if f.unit else ""
@@ -448,10 +454,10 @@ def section_from_args(cls: type[T], args: argparse.Namespace, prefix: str = "") 
     raises :class:`ConfigError` naming the flag)."""
     values: dict[str, Any] = {}
     for f in fields(cls):
+        if f.is_tables or (f.is_section and f.optional):
+            continue
         if f.is_section:
             values[f.name] = section_from_args(f.type, args, f"{prefix}{f.key}-")
-            continue
-        if f.is_tables:
             continue
         value = getattr(args, _dest(prefix, f))
         values[f.name] = tuple(value) if isinstance(value, list) else value

@@ -16,7 +16,8 @@
 :class:`DriverPair` serves the axes of one robot on its bus: commands in, Heartbeat (100 ms)
 and Get_Encoder_Estimates (10 ms) out, remote requests answered; malformed frames ignored
 and counted. Fault injection: silence a node, drop or delay a fraction of the frames it
-sends (seeded RNG), raise an error bit.
+sends (seeded RNG), raise an error bit. An imperfect world (docs/world.md) adds Gaussian
+noise to the positions the encoder estimates report (``encoder_noise``), never to the axis.
 
 Frames in go through :func:`transport.odrive_frames.decode`; frames out through its
 :func:`encode`, except the encoder estimates (the steady flow out), packed directly with their
@@ -35,6 +36,7 @@ from functools import lru_cache
 import can
 
 from common import drivers
+from common.draws import ENCODER, normal
 from transport.odrive_frames import (
     ENCODER_ESTIMATES,
     AxisError,
@@ -157,6 +159,13 @@ class DriverPair:
     ignored: Counter = field(default_factory=Counter)
     sent: int = 0
     latency: float = 0.0      # s, from a velocity command's arrival to the axis applying it
+    # rev, standard deviation of the noise on each reported encoder position: draw k of the
+    # right (0) or left (1) wheel is common.draws.normal(noise_seed, ENCODER, noise_key,
+    # wheel, k); noise_key is the robot's index in its scenario
+    encoder_noise: float = 0.0
+    noise_seed: int = 0
+    noise_key: int = 0
+    _reports: Counter = field(default_factory=Counter)   # node -> encoder estimates made
     _due: dict = field(default_factory=dict)     # node -> [heartbeat, encoder] next due [s]
     _commands: deque = field(default_factory=deque)   # (due [s], axis, Input_Vel [rev/s])
     _queue: list = field(default_factory=list)
@@ -220,11 +229,18 @@ class DriverPair:
                            data=_heartbeat_data(node, int(axis.error), int(axis.state)),
                            is_extended_id=False)
 
-    @staticmethod
-    def _encoder_estimates(node: int, axis: EmulatedAxis) -> can.Message:
+    def _encoder_estimates(self, node: int, axis: EmulatedAxis) -> can.Message:
+        """The axis' encoder estimates: its position [rev] (plus noise in an imperfect
+        world) and speed [rev/s]."""
+        pos = axis.pos
+        if self.encoder_noise > 0.0:
+            k = self._reports[node]
+            self._reports[node] = k + 1
+            wheel = 0 if node == self.right_node else 1
+            pos += self.encoder_noise * normal(self.noise_seed, ENCODER, self.noise_key,
+                                               wheel, k)
         return can.Message(arbitration_id=arbitration_id(node, Cmd.GET_ENCODER_ESTIMATES),
-                           data=ENCODER_ESTIMATES.pack(axis.pos, axis.vel),
-                           is_extended_id=False)
+                           data=ENCODER_ESTIMATES.pack(pos, axis.vel), is_extended_id=False)
 
     def _emit(self, node: int, msg: can.Message) -> None:
         f = self.faults[node]
@@ -287,7 +303,8 @@ class DriverPair:
             axis.step(dt)
 
     def wheel_state(self) -> tuple[float, float, float, float]:
-        """(right, left) wheel positions [rev] and actual speeds [rev/s]."""
+        """(right, left) wheel positions [rev] and actual speeds [rev/s]: the true turns, with
+        no encoder noise."""
         r, l_ = self.axes[self.right_node], self.axes[self.left_node]
         return r.pos, l_.pos, r.vel, l_.vel
 

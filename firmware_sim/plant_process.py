@@ -3,7 +3,9 @@
 * :func:`run_drivers_only` serves one robot's two emulated drivers on a bus: the HIL bench
   where a PC with a CAN adapter stands in for the motor drivers of a real robot computer.
 * :func:`run_sitl_plant` hosts several robots of a scenario: each robot's drivers on its own
-  bus, motion from the drivers' actual wheel speeds, truth and obstacle detections on Zenoh.
+  bus, motion from the drivers' actual wheel speeds, truth and obstacle detections on Zenoh;
+  the scenario's ``[world]`` slips the wheels, adds noise to the encoder estimates the
+  drivers report and to the detections, and drops detections (docs/world.md).
 
 Both run a fixed-rate loop on the system clock until SIGINT/SIGTERM; the SITL plant steps
 its physics by the time that really passed since the last tick, so an overrun on a loaded
@@ -122,6 +124,11 @@ def _pose(pose: Iterable[float]) -> tuple[float, float, float]:
     return x, y, theta
 
 
+def _scenario_index(scenario) -> dict[int, int]:
+    """Robot id -> its index in the scenario (the key of its random draws)."""
+    return {int(rid): i for i, rid in enumerate(scenario.ids)}
+
+
 def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: float,
                clock: SystemClock, realtime_priority: int = 0) -> dict:
     """Publish truth and obstacles of ``robots`` while moving them in real time until a
@@ -130,7 +137,11 @@ def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: floa
     publishers = {(kind, rb.robot_id): session.declare_publisher(getattr(keys, kind)(rb.robot_id))
                   for rb in robots for kind in ("truth", "obstacles")}
     plant = SitlPlant(robots, scenario.robot, scenario.obstacles, scenario.sensing_range,
-                      lambda kind, rid, data: publishers[(kind, rid)].put(data))
+                      lambda kind, rid, data: publishers[(kind, rid)].put(data),
+                      world=scenario.world, period=scenario.control.period,
+                      index=_scenario_index(scenario))
+    if not scenario.world.ideal:
+        log.warning("imperfect world: %s", scenario.world)
     loop = FixedRateLoop(dt, clock)
     _stop_on_signals(loop.stop)
     if realtime_priority:
@@ -182,11 +193,13 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
     robots: list[PlantRobot] = []
     pairs: dict[int, DriverPair] = {}           # the emulated drivers of robots, by id
     try:
-        index = {int(rid): i for i, rid in enumerate(scenario.ids)}
-        r = scenario.robot
+        index = _scenario_index(scenario)
+        r, w = scenario.robot, scenario.world
         for rid in robot_ids:
             bus = open_bus(can_interface, can_channel, port=can_ports.get(rid))
-            drivers = pairs[rid] = DriverPair(bus, latency=r.drive_latency)
+            drivers = pairs[rid] = DriverPair(bus, latency=r.drive_latency,
+                                              encoder_noise=w.encoder_noise, noise_seed=w.seed,
+                                              noise_key=index[rid])
             drivers.configure(vel_limit=r.wheel_speed_limit, ramp=r.wheel_ramp,
                               watchdog=watchdog)
             robots.append(PlantRobot(rid, _pose(scenario.poses[index[rid]]), drivers))

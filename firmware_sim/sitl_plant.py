@@ -20,12 +20,21 @@ grow with time.
 The plant publishes on Zenoh what the real world would give the robot's sensors: obstacle
 detections within sensing range (10 Hz) and, SITL only, the ground truth (every
 ``truth_every`` physics steps).
+
+An imperfect world (:class:`firmware_sim.world.WorldParams`, docs/world.md "In the SITL")
+applies here with the batch simulator's own functions (:mod:`firmware_sim.world_step`):
+each wheel slips (the ground moves by (1 - s) of the wheel's turn, s a Gauss-Markov process
+stepped once per control period of the plant's own clock, keyed by the robot's index in its
+scenario: the batch's sequence of slips), and each detection goes missing or is off by
+noise. The drivers' encoders still count the full turns (their noise is the drivers':
+:class:`firmware_sim.odrive_sim.DriverPair`). The ideal world runs exactly the code, and
+gives exactly the motion, of a plant without one.
 """
 from __future__ import annotations
 
 import logging
 import select
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -34,7 +43,8 @@ import numpy as np
 from agent.config import RobotParams
 from agent.kinematics import TWO_PI, arc_step, body_velocity
 from common.payloads import ObstaclesMsg, TruthMsg
-from firmware_sim.world import Obstacles
+from firmware_sim.world import Obstacles, WorldParams
+from firmware_sim.world_step import TIME_EPS, detect, slip_next
 
 log = logging.getLogger(__name__)
 
@@ -73,14 +83,30 @@ class SitlPlant:
 
     def __init__(self, robots: list[PlantRobot], robot: RobotParams, obstacles: Obstacles,
                  sensing_range: float, publish: Callable[[str, int, bytes], None],
-                 truth_every: int = 2, obstacles_period: float = 0.1):
-        """``truth_every``: publish truth every this many physics steps."""
+                 truth_every: int = 2, obstacles_period: float = 0.1,
+                 world: WorldParams | None = None, period: float = 0.02,
+                 index: Mapping[int, int] | None = None):
+        """``truth_every``: publish truth every this many physics steps. ``world``: its wheel
+        slip and detection noise and dropout apply (None: the ideal world); ``period`` [s]
+        steps the slip (the scenario's control period); ``index`` maps robot ids to their
+        indices in the scenario, the keys of the draws (default: their order in
+        ``robots``)."""
         self.robots, self.params, self.obstacles = robots, robot, obstacles
         self.sensing_range, self.publish = sensing_range, publish
         self.truth_every, self.obstacles_period = truth_every, obstacles_period
         self._steps = 0
         self._seq = 0
         self._next_obstacles = -np.inf
+        self.world = world or WorldParams()
+        self.period = period
+        self._keys = [index[rb.robot_id] if index is not None else j
+                      for j, rb in enumerate(robots)]
+        # (right, left) slip fraction of each robot's wheels; None: no slip
+        self.slip: np.ndarray | None = (np.zeros((len(robots), 2))
+                                        if self.world.wheel_slip > 0 else None)
+        self._time = 0.0              # s, the plant's own clock (sum of its steps)
+        self._slip_next = 0           # the next control period whose slip is to draw
+        self._publications = 0        # detections published so far (key of their draws)
         # one poll for every robot's bus per step, not an empty read of each
         self._poll = select.poll()
         self._fds = {}
@@ -94,21 +120,28 @@ class SitlPlant:
         """Serve the drivers at ``now_m`` (monotonic [s]), advance them and the robots by
         ``dt`` [s]; publish what is due, stamped ``now_w`` (wall clock [s])."""
         r = self.params
+        slip = self.slip
+        if slip is not None:
+            self._advance_slip(slip)
         waiting = {fd for fd, _ in self._poll.poll(0)} if self._fds else ()
-        for rb in self.robots:
+        for j, rb in enumerate(self.robots):
             fd = self._fds.get(rb.robot_id)
             rb.drivers.service(now_m, receive=fd is None or fd in waiting)
             rb.drivers.step(dt)
             state = rb.drivers.wheel_state()
             if state is None:
                 continue
+            grip = (1.0 - slip[j, 0], 1.0 - slip[j, 1]) if slip is not None else None
             if rb.reported_at is not None:
-                self._roll_to(rb, state[0], state[1], dt)
+                self._roll_to(rb, state[0], state[1], dt, grip)
                 continue
             _, _, right, left = state            # speeds at the step's end [rev/s]
+            if grip is not None:                 # the ground moves by (1 - s) of the turn
+                right, left = right * grip[0], left * grip[1]
             v, u = body_velocity(TWO_PI * right, TWO_PI * left, r.wheel_radius, r.wheel_base)
             rb.v, rb.u = float(v), float(u)
             rb.pose = arc_step(*rb.pose, rb.v * dt, rb.u * dt)
+        self._time += dt
         self._steps += 1
         if self._steps % self.truth_every == 0:
             self._seq += 1
@@ -121,29 +154,62 @@ class SitlPlant:
             self._next_obstacles = now_m + self.obstacles_period
             self.publish_obstacles(now_w)
 
-    def _roll_to(self, rb: PlantRobot, right: float, left: float, dt: float) -> None:
+    def _advance_slip(self, slip: np.ndarray) -> None:
+        """Draw the slip of every control period begun by the plant's clock (the slip of
+        period k is in force from k T to (k + 1) T, as in the batch simulator)."""
+        w = self.world
+        due = int((self._time + TIME_EPS) / self.period)      # a sum of steps: rounded
+        while self._slip_next <= due:
+            for j, key in enumerate(self._keys):
+                for wheel in range(2):
+                    slip[j, wheel] = slip_next(slip[j, wheel], self.period, w.seed,
+                                               w.wheel_slip, key, wheel, self._slip_next)
+            self._slip_next += 1
+
+    def _roll_to(self, rb: PlantRobot, right: float, left: float, dt: float,
+                 grip: tuple[float, float] | None = None) -> None:
         """Move ``rb`` through the arc its wheels turned from ``rb.last_turns`` to (right,
-        left) [rev]."""
+        left) [rev], the ground moving by ``grip`` (right, left) of each turn (None: 1)."""
         last, rb.last_turns = rb.last_turns, (right, left)
         if last is None:
             return
         r = self.params
-        dist, dtheta = body_velocity(TWO_PI * (right - last[0]), TWO_PI * (left - last[1]),
+        turn_r, turn_l = right - last[0], left - last[1]
+        if grip is not None:
+            turn_r, turn_l = turn_r * grip[0], turn_l * grip[1]
+        dist, dtheta = body_velocity(TWO_PI * turn_r, TWO_PI * turn_l,
                                      r.wheel_radius, r.wheel_base)
         rb.v, rb.u = dist / dt, dtheta / dt
         rb.pose = arc_step(*rb.pose, dist, dtheta)
 
     def publish_obstacles(self, now_w: float) -> None:
-        """Each robot's detections: obstacles whose surface is within sensing range."""
+        """Publish each robot's :meth:`detections`, stamped ``now_w`` [s]."""
         if not len(self.obstacles):
             return
-        pos = np.array([rb.pose[:2] for rb in self.robots])
+        for msg in self.detections(now_w):
+            self.publish("obstacles", msg.robot_id, msg.encode())
+
+    def detections(self, now_w: float) -> list[ObstaclesMsg]:
+        """Each robot's detections, stamped ``now_w`` [s]: the obstacles whose surface is
+        within sensing range of its true position; in an imperfect world each is missing
+        with probability ``detection_dropout``, the others' centre and radius [m] off by
+        N(0, ``detection_noise``) (:func:`firmware_sim.world_step.detect`, keyed by the
+        robot's scenario index, the obstacle's index and the count of publications)."""
+        pos = np.array([rb.pose[:2] for rb in self.robots]).reshape(-1, 2)
         seen = self.obstacles.clearance(pos) <= self.sensing_range
         self._seq += 1
-        for rb, mask in zip(self.robots, seen):
-            self.publish("obstacles", rb.robot_id,
-                         ObstaclesMsg(rb.robot_id, self._seq, now_w, self.obstacles.centers[mask],
-                                      self.obstacles.radii[mask]).encode())
+        w, out = self.world, []
+        for key, rb, mask in zip(self._keys, self.robots, seen):
+            centers, radii = self.obstacles.centers[mask], self.obstacles.radii[mask]
+            if w.detections:
+                o_k = np.flatnonzero(mask)
+                o_x, o_y, o_r = centers[:, 0].copy(), centers[:, 1].copy(), radii.copy()
+                kept = detect(key, self._publications, w.seed, w.detection_noise,
+                              w.detection_dropout, len(o_k), o_x, o_y, o_r, o_k)
+                centers, radii = np.column_stack([o_x[:kept], o_y[:kept]]), o_r[:kept]
+            out.append(ObstaclesMsg(rb.robot_id, self._seq, now_w, centers, radii))
+        self._publications += 1
+        return out
 
     def close(self) -> None:
         for rb in self.robots:

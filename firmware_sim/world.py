@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.draws import loss_burst_problem
 from common.schema import ConfigError, setting, tables, validate
 
 
@@ -75,11 +76,8 @@ class WorldParams:
 
     def __post_init__(self) -> None:
         validate(self)
-        if self.link_loss > 0 and self.loss_burst > 1 and \
-                self.link_loss / (1.0 - self.link_loss) > self.loss_burst:
-            raise ConfigError(f"WorldParams.loss_burst: a loss of {self.link_loss:g} needs "
-                              f"bursts of at least {self.link_loss / (1 - self.link_loss):.3g} "
-                              f"messages, got {self.loss_burst:g}")
+        if problem := loss_burst_problem(self.link_loss, self.loss_burst):
+            raise ConfigError(f"WorldParams.loss_burst: {problem}")
         robots = [k.robot for k in self.kill]
         if len(set(robots)) != len(robots):
             raise ConfigError(f"WorldParams.kill: a robot dies twice: {sorted(robots)}")
@@ -97,3 +95,8 @@ class WorldParams:
     @property
     def detections(self) -> bool:
         return self.detection_noise > 0 or self.detection_dropout > 0
+
+    @property
+    def link(self) -> bool:
+        """Neighbour states arrive late or not at all."""
+        return self.link_delay > 0 or self.link_jitter > 0 or self.link_loss > 0

@@ -3,8 +3,9 @@
 What an agent would know, produced from the plant's truth: its pose from the odometry of
 slipping wheels read through noisy encoders, and its neighbours' states as they arrive over
 a link with delay, jitter and bursty loss. Every random draw is a hash of (seed, stream,
-robot, index, period), so a run is reproducible from its scenario and seed whatever the
-number of threads, and the compiled and interpreted runs draw the same numbers. Compiled
+robot, index, period) (:mod:`common.draws`), so a run is reproducible from its scenario and
+seed whatever the number of threads, and the compiled and interpreted runs draw the same
+numbers. Compiled
 with the law (:mod:`firmware_sim.compiled`); plain floats, ints and arrays only.
 
 The model (docs/world.md): each robot publishes its odometry pose and command every period;
@@ -20,48 +21,14 @@ import numpy as np
 
 from agent.neighbours import extrapolate
 from agent.odometry import odometry_step
+from common.draws import AGE, DETECT, DROPOUT, ENCODER, LOSS, SLIP, loss_step, normal, uniform
 
 prange = range   # numba.prange when compiled
 
-M32 = 0xFFFFFFFF
-LOSS, AGE, SLIP, ENCODER, DETECT, DROPOUT = 1, 2, 3, 4, 5, 6   # streams of draws
 NONE, FRESH, STALE = 0, 1, 2                           # what a robot knows of a neighbour
 SLIP_TIME = 1.0      # s, correlation time of wheel slip
+SLIP_MAX = 0.9       # slip fractions are clipped to +-SLIP_MAX
 TIME_EPS = 1e-9      # s, arrival times equal to a period's start up to rounding count as due
-
-
-def _mul32(h: int, c: int) -> int:
-    """h * c mod 2^32 for h, c < 2^32, with no intermediate above 2^49 (signed overflow is
-    undefined in compiled code)."""
-    return (h * (c & 0xFFFF) + (((h * (c >> 16)) & 0xFFFF) << 16)) & M32
-
-
-def _fmix(h: int) -> int:
-    """MurmurHash3's 32-bit finaliser."""
-    h ^= h >> 16
-    h = _mul32(h, 0x85EBCA6B)
-    h ^= h >> 13
-    h = _mul32(h, 0xC2B2AE35)
-    return h ^ (h >> 16)
-
-
-def _combine(h: int, x: int) -> int:
-    """Hash the non-negative integer x (< 2^32) into h."""
-    return _fmix((h + _mul32(x & M32, 0x9E3779B1) + 0x7F4A7C15) & M32)
-
-
-def uniform(seed: int, stream: int, a: int, b: int, step: int) -> float:
-    """A uniform draw in (0, 1), a function of its five non-negative integer keys."""
-    h = _combine(_combine(_combine(0, seed & M32), seed >> 32), stream)
-    h = _combine(_combine(_combine(h, a), b), step)
-    return (h + 0.5) / 4294967296.0
-
-
-def normal(seed: int, stream: int, a: int, b: int, step: int) -> float:
-    """A standard normal draw (Box-Muller), a function of its keys."""
-    u1 = uniform(seed, stream, a, 2 * b, step)
-    u2 = uniform(seed, stream, a, 2 * b + 1, step)
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
 def publish(step: int, period: float, est: np.ndarray, cmd: np.ndarray, alive: np.ndarray,
@@ -75,20 +42,14 @@ def publish(step: int, period: float, est: np.ndarray, cmd: np.ndarray, alive: n
     Age: delay + jitter * normal, at least 0 and at most H - 2 periods."""
     slot = step % hist.shape[0]
     longest = (hist.shape[0] - 2) * period
-    stay_bad = 1.0 - 1.0 / burst
-    go_bad = loss / (burst * (1.0 - loss)) if burst > 1.0 else loss
     for j in prange(est.shape[0]):
         hist[slot, j, 0], hist[slot, j, 1], hist[slot, j, 2] = est[j, 0], est[j, 1], est[j, 2]
         hist[slot, j, 3], hist[slot, j, 4] = cmd[j, 0], cmd[j, 1]
         hist[slot, j, 5] = step * period
         lost = not alive[j]
         if alive[j] and loss > 0.0:
-            draw = uniform(seed, LOSS, j, 0, step)
-            if burst > 1.0:
-                bad[j] = 1 if draw < (stay_bad if bad[j] else go_bad) else 0
-                lost = bad[j] != 0
-            else:
-                lost = draw < loss
+            bad[j] = loss_step(uniform(seed, LOSS, j, 0, step), bad[j], loss, burst)
+            lost = bad[j] != 0
         age = delay
         if jitter > 0.0:
             age += jitter * normal(seed, AGE, j, 0, step)
@@ -119,12 +80,18 @@ def slip_update(step: int, period: float, seed: int, sigma: float, slip: np.ndar
     """Advance each wheel's slip fraction ``slip`` (N, 2) one period: a first-order
     Gauss-Markov process of standard deviation ``sigma`` and correlation time SLIP_TIME,
     clipped to [-0.9, 0.9]."""
-    rho = math.exp(-period / SLIP_TIME)
-    gain = sigma * math.sqrt(1.0 - rho * rho)
     for i in prange(slip.shape[0]):
         for w in range(2):
-            s = rho * slip[i, w] + gain * normal(seed, SLIP, i, w, step)
-            slip[i, w] = min(max(s, -0.9), 0.9)
+            slip[i, w] = slip_next(slip[i, w], period, seed, sigma, i, w, step)
+
+
+def slip_next(s: float, period: float, seed: int, sigma: float, i: int, w: int,
+              step: int) -> float:
+    """Wheel ``w`` (0 right, 1 left) of robot ``i``: its slip fraction ``s`` one period
+    [s] later (``step``: the period's index, the key of the draw)."""
+    rho = math.exp(-period / SLIP_TIME)
+    s = rho * s + sigma * math.sqrt(1.0 - rho * rho) * normal(seed, SLIP, i, w, step)
+    return min(max(s, -SLIP_MAX), SLIP_MAX)
 
 
 def odometry(step: int, seed: int, noise: float, enc: np.ndarray, last_read: np.ndarray,

@@ -12,13 +12,21 @@ and watchdog trips.
 A plant that dies ends the run at once; an agent that dies is reported and the run goes on
 (its robot stands still, its drivers' watchdog stopped it), so what the others do is
 measured. Any failure or Ctrl-C tears down every process.
+
+The scenario's ``[world]`` (docs/world.md "In the SITL"): the plant slips the wheels and
+spoils the encoders and detections; the agents' configs get an ``[impairment]`` section
+(simulation only) for the link's delay, jitter and loss; and each ``[[world.kill]]`` is done
+here: at mission epoch + ``at`` (this process's clock) the robot's agent is sent SIGKILL by
+PID, a planned death that is recorded in ``SitlRun.killed``, not reported as a lost process.
 """
 from __future__ import annotations
 
 import json
 import logging
 import os
+import signal
 import socket
+import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,12 +37,13 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
+from agent.impairment import ImpairmentSettings
 from agent.settings import AgentSettings, SensingSettings
 from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
 from common.vocabulary import StateFlags
 from hil.mavlink_router import MavlinkRouter
-from hil.processes import Children, wait_until
+from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
 from hil.scenario import Scenario
 from transport.canbus import DEFAULT_GROUP
@@ -80,6 +89,7 @@ class SitlRun:
 
     epoch: float = 0.0
     lost: dict = field(default_factory=dict)      # child name -> exit code
+    killed: dict = field(default_factory=dict)    # robot id -> mission time [s] of its kill
     agent_stats: dict = field(default_factory=dict)
     plant_stats: list = field(default_factory=list)
 
@@ -110,6 +120,10 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
         can = CanSettings(interface=opts.can_interface,
                           channel=(opts.can_channel or "vcan{i}").format(i=index, id=rid))
     x, y, theta = map(float, sc.poses[index])
+    w = sc.world
+    impairment = (ImpairmentSettings(seed=w.seed, link_delay=w.link_delay,
+                                     link_jitter=w.link_jitter, link_loss=w.link_loss,
+                                     loss_burst=w.loss_burst) if w.link else None)
     return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=(x, y, theta),
                          control=sc.control, robot=sc.robot, can=can,
                          zenoh=ZenohSettings(mode="client", connect=(endpoint,),
@@ -117,7 +131,8 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
                          autostart=True, sensing=SensingSettings(sc.sensing_range),
                          realtime_priority=opts.realtime_priority,
                          mavlink=MavlinkSettings(url=f"udpout:127.0.0.1:{mavlink_port}",
-                                                 signing_key_file=opts.mavlink_key))
+                                                 signing_key_file=opts.mavlink_key),
+                         impairment=impairment)
 
 
 def _status_table(sc: Scenario, states: Mapping[int, Received[StateMsg]],
@@ -211,7 +226,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                                  sc.formation.offsets)
             router.put(keys.mission, mission.encode())
             console.print(f"mission published; t = 0 at epoch {run.epoch:.3f}")
-            _watch(sc, run, children, router, keys, mission, truth, states, presence,
+            _watch(sc, run, children, agents, router, keys, mission, truth, states, presence,
                    opts, console)
             # clean stop: agents first (zero velocity, IDLE), then the plants
             for child in agents.values():
@@ -282,19 +297,42 @@ def _write_manifest(out: Path, sc: Scenario, settings: list[AgentSettings], endp
     tmp.replace(out / "manifest.json")
 
 
-def _watch(sc: Scenario, run: SitlRun, children: Children, router, keys: Keys,
-           mission: MissionMsg, truth: Latest, states: Latest, presence: Presence,
-           opts: SitlOptions, console: Console) -> None:
+def kill_agent(child: Child, console: Console) -> bool:
+    """End a planned death: SIGKILL to the agent's PID (no clean shutdown: it stops
+    commanding and publishing at once), its exit collected. False if it had already ended
+    (then it is a lost process, not a planned death)."""
+    if child.proc.poll() is not None:
+        return False
+    child.expected_exit = True
+    os.kill(child.pid, signal.SIGKILL)       # our child, not yet reaped: the PID is its own
+    try:
+        child.proc.wait(timeout=5.0)
+    except subprocess.TimeoutExpired:
+        log.warning("%s (pid %d) still there after SIGKILL", child.name, child.pid)
+    console.print(f"{child.name} (pid {child.pid}) killed as the world plans")
+    return True
+
+
+def _watch(sc: Scenario, run: SitlRun, children: Children, agents: Mapping[int, Child],
+           router, keys: Keys, mission: MissionMsg, truth: Latest, states: Latest,
+           presence: Presence, opts: SitlOptions, console: Console) -> None:
     end = run.epoch + sc.duration
     live = Live(console=console, auto_refresh=False, transient=True) \
         if opts.live and console.is_terminal else None
     last_mission = time.monotonic()
     last_note = 0.0
+    kills = sorted((k.at, k.robot) for k in sc.world.kill if k.at <= sc.duration)
     if live:
         live.start()
     try:
         while time.time() < end:
-            time.sleep(0.1)
+            due = run.epoch + kills[0][0] if kills else end
+            time.sleep(min(0.1, max(due - time.time(), 0.0)))
+            while kills and time.time() >= run.epoch + kills[0][0]:
+                _, rid = kills.pop(0)
+                now = time.time()
+                if kill_agent(agents[rid], console):
+                    run.killed[rid] = now - run.epoch
             for child in children.failed():
                 if child.name in run.lost:
                     continue

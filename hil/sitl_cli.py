@@ -15,6 +15,7 @@ from hil.console import summary_table
 from hil.exit_codes import EXIT_LOST, EXIT_NOT_RUN, EXIT_OK, EXIT_UNSAFE, BadInput
 
 if TYPE_CHECKING:
+    from firmware_sim.world import WorldParams
     from hil.sitl import SitlRun
 
 
@@ -97,14 +98,16 @@ def run(args: argparse.Namespace, console: Console) -> int:
     except SitlError as exc:
         print(f"boundswarm sitl: {exc}", file=sys.stderr)
         return EXIT_NOT_RUN
-    data, result, extra = analyse_recording(out / "run.mcap", sc)
+    data, result, extra = analyse_recording(out / "run.mcap", sc, killed=swarm.killed)
     metrics = result.summary(sc.name, sc.duration)
     metrics["robot"] = dataclasses.asdict(sc.robot)
+    metrics["world"] = dataclasses.asdict(sc.world)
     metrics["sitl"] = _sitl_metrics(swarm, extra["epoch"], sc.duration,
                                     time.perf_counter() - started)
     run_folder.write_run(out, metrics, data, sc.source.read_text() if sc.source else None)
     draw_figures(data, sc.obstacles, sc.control.a, sc.control.b, out / run_folder.FIGURES)
     console.print(summary_table(metrics, f"SITL {sc.name}: {len(sc.ids)} agents"))
+    console.print(f"world: {describe_world(sc.world)}")
     s = metrics["sitl"]
     console.print(f"deadline misses: {s['deadline_misses_in_mission']} in the mission, "
                   f"{s['deadline_misses']} in all (start-up included), watchdog trips: "
@@ -122,6 +125,16 @@ def run(args: argparse.Namespace, console: Console) -> int:
     return EXIT_LOST if swarm.lost else EXIT_OK
 
 
+def describe_world(world: WorldParams) -> str:
+    """One line saying which world ran: ``ideal``, or its imperfections and seed."""
+    parts = [f"{k} {v:g}" for k, v in dataclasses.asdict(world).items()
+             if k not in ("seed", "kill", "loss_burst") and v]
+    if world.link_loss and world.loss_burst > 1:
+        parts.append(f"loss_burst {world.loss_burst:g}")
+    parts += [f"robot {k.robot} killed at {k.at:g} s" for k in world.kill]
+    return f"{', '.join(parts)} (seed {world.seed})" if parts else "ideal"
+
+
 def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> dict[str, Any]:
     """The ``sitl`` block of metrics.json: loops, links, drivers and CPU of every process."""
     from hil.sitl_report import missed_in
@@ -131,6 +144,7 @@ def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> d
         "wall_seconds": round(wall, 2),
         "agents_reporting": len(run.agent_stats),
         "lost_processes": run.lost,
+        "killed_at": run.killed,
         "deadline_misses": sum(lp["overruns"] for lp in loops.values()),
         "deadline_misses_in_mission": sum(mission_misses.values()),
         "missed_in_mission_per_agent": mission_misses,
@@ -147,6 +161,8 @@ def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> d
                               **{f"beacon_{k}": v for k, v in
                                  st["zenoh"].get("beacons", {}).get("dropped", {}).items()}}
                           for r, st in run.agent_stats.items()},
+        "impairment": {r: st["impairment"] for r, st in run.agent_stats.items()
+                       if "impairment" in st},
         "watchdog_trips": {k: v for p in run.plant_stats
                            for k, v in p.get("watchdog_trips", {}).items()},
         "plant_overruns": sum(p["overruns"] for p in run.plant_stats),

@@ -5,11 +5,13 @@ Ground truth (``truth`` messages from the plant) gives the robots' poses; the ag
 resampled on the control period from the mission epoch (latest message at or before each
 instant). Distances and collisions are checked at every truth sample, tracking and
 convergence at every control period, with the same :class:`RunMetrics` as the batch
-simulator.
+simulator. A robot whose agent was killed (``[[world.kill]]``) counts for safety all along
+and for convergence only before its death, as in the batch simulator.
 """
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +51,18 @@ def _pose_at(times: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray
     return out
 
 
+def _pose_error(truth_t: np.ndarray, truth: np.ndarray, state_t: np.ndarray,
+                state: np.ndarray, duration: float) -> float:
+    """Largest distance [m] in the mission between where a robot's agent said it was (its
+    states' x, y, columns 5 and 6) and its truth (interpolated) at the states' stamps."""
+    inside = (state_t >= 0.0) & (state_t <= duration)
+    if not inside.any():
+        return 0.0
+    ts, xy = state_t[inside], state[inside][:, 5:7]
+    return float(np.hypot(xy[:, 0] - np.interp(ts, truth_t, truth[:, 0]),
+                          xy[:, 1] - np.interp(ts, truth_t, truth[:, 1])).max())
+
+
 def missed_in(loop_stats: dict, start: float, end: float) -> int:
     """Periods a loop skipped (its ``overrun_events``, UNIX times) between ``start`` and
     ``end`` [s]: the deadline misses of a mission, apart from start-up and shut-down. Those
@@ -57,8 +71,13 @@ def missed_in(loop_stats: dict, start: float, end: float) -> int:
             + loop_stats.get("overruns_unlogged", 0))
 
 
-def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, dict]:
-    """(run data on the control period, metrics, extras such as the epoch) of a recording."""
+def analyse_recording(path: Path, sc: Scenario, killed: Mapping[int, float] | None = None
+                      ) -> tuple[RunData, RunMetrics, dict]:
+    """(run data on the control period, metrics, extras such as the epoch) of a recording.
+    ``killed``: robot id -> mission time [s] its agent was killed (default: the scenario's
+    ``[[world.kill]]`` within its duration)."""
+    if killed is None:
+        killed = {k.robot: k.at for k in sc.world.kill if k.at <= sc.duration}
     truth, states = defaultdict(list), defaultdict(list)
     epoch = None
     for _topic, kind, _log_t, msg in read_messages(path):
@@ -69,7 +88,8 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
                                                           msg["v"], msg["u"]]))
         elif kind == "state":
             states[msg["robot_id"]].append((msg["stamp"], [msg["v"], msg["u"], msg["mode"],
-                                                           msg["x_d"], msg["y_d"]]))
+                                                           msg["x_d"], msg["y_d"], msg["x"],
+                                                           msg["y"]]))
     if epoch is None:
         raise RecordingError(f"{path}: no mission message; was the mission started?")
     missing = [int(i) for i in sc.ids if not truth.get(int(i)) or not states.get(int(i))]
@@ -84,6 +104,7 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
     mode = np.zeros((len(t), n), dtype=int)
     truth_t = []
     truth_series = {}
+    pose_error = 0.0
     for j, rid in enumerate(sc.ids):
         tt, tv = _series(truth[int(rid)])
         st, sv = _series(states[int(rid)])
@@ -92,10 +113,14 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
         pose[:, j] = _pose_at(tt - epoch, tv, t)
         s = _at(st - epoch, sv, t)
         v[:, j], u[:, j], mode[:, j] = s[:, 0], s[:, 1], s[:, 2].astype(int)
+        pose_error = max(pose_error, _pose_error(tt - epoch, tv, st - epoch, sv, sc.duration))
     ref = np.stack([sc.formation.reference(tk)[0] for tk in t])
     ref_vel = np.stack([sc.formation.reference(tk)[1] for tk in t])
 
     metrics = RunMetrics(ids=sc.ids, a=sc.control.a)
+    metrics.killed = sorted(int(rid) for rid in killed)
+    metrics.max_pose_error = pose_error
+    death = np.array([killed.get(int(rid), np.inf) for rid in sc.ids])     # mission time [s]
     # geometry at every truth sample of any robot, all pairs, all obstacles
     samples = np.unique(np.concatenate(truth_t))
     samples = samples[(samples >= 0.0) & (samples <= sc.duration)]
@@ -108,6 +133,7 @@ def analyse_recording(path: Path, sc: Scenario) -> tuple[RunData, RunMetrics, di
         metrics.observe_geometry(float(ts), pos, pairs, robots, obstacles.clearance(pos))
     last_mode, alive = np.zeros(n), np.ones(n, bool)
     for k, tk in enumerate(t):
+        np.less(tk, death, out=alive)
         cmd = np.column_stack([v[k], u[k], mode[k]]).astype(float)
         err, within = np.zeros(n), np.zeros(n, bool)
         max_v, max_u, switches, all_within = period_summary(

@@ -124,22 +124,20 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
                                  robot.wheel_base)
     pose = np.array([start])
     wheels = np.zeros((1, 2))                               # the batch plant's wheels [rev/s]
-    turns = np.zeros(2)                                     # the truth's wheel turns [rev]
+    turns = np.zeros((1, 2))                                # the truth's wheel turns [rev]
     dt = 0.005
     for k in range(20):
         plant.step(dt, dt * k, 100.0 + dt * k)
-        advance(pose, np.array([[[v_cmd, u_cmd]]]), wheels, False, robot.wheel_radius,
-                robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp, dt, 1,
-                np.ones(1, bool),
-                np.zeros((2, 1, 2)))
-        turns += wheels[0] * dt
+        advance(pose, np.array([[[v_cmd, u_cmd]]]), wheels, np.zeros((1, 2)), turns, False,
+                robot.wheel_radius, robot.wheel_base, robot.wheel_speed_limit,
+                robot.wheel_ramp, dt, 1, np.ones(1, bool), np.zeros((2, 1, 2)))
         v, u = body_velocity(TWO_PI * wheels[0, 0], TWO_PI * wheels[0, 1], robot.wheel_radius,
                              robot.wheel_base)
         assert (rb.v, rb.u) == pytest.approx((v, u), abs=1e-12)
         assert rb.pose == pytest.approx(tuple(pose[0]), abs=1e-12)
     assert wheels[0] == pytest.approx([right, left])                  # the ramp is over
     encoders = drivers.wheel_state()[:2]
-    assert encoders == pytest.approx(tuple(turns - 0.5 * dt * np.array([right, left])),
+    assert encoders == pytest.approx(tuple(turns[0] - 0.5 * dt * np.array([right, left])),
                                      abs=1e-12)
 
 
