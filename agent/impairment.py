@@ -29,15 +29,15 @@ from common.schema import ConfigError, setting, validate
 
 
 @dataclass(frozen=True)
-class ImpairmentSettings:
-    """SIMULATION ONLY (written by ``boundswarm sitl``): the link of the scenario's [world]
-    on the neighbour states this agent receives."""
+class LinkParams:
+    """A link that delays and loses neighbour states: the link part of a scenario's [world]
+    (firmware_sim.world.WorldParams) and of an agent's simulation-only [impairment]."""
 
-    seed: int = setting(0, doc="seed of the draws (the world's)", lo=0)
+    seed: int = setting(0, doc="seed of every random draw", lo=0)
     link_delay: float = setting(0.0, unit="s", lo=0.0, hi=5.0,
-                                doc="mean delay added to each neighbour state received")
+                                doc="mean one-way age of a neighbour's state when it arrives")
     link_jitter: float = setting(0.0, unit="s", lo=0.0, hi=5.0,
-                                 doc="standard deviation of that delay")
+                                 doc="standard deviation of that age")
     link_loss: float = setting(0.0, lo=0.0, hi=0.95,
                                doc="long-run fraction of neighbour states lost")
     loss_burst: float = setting(1.0, unit="messages", lo=1.0,
@@ -47,7 +47,13 @@ class ImpairmentSettings:
     def __post_init__(self) -> None:
         validate(self)
         if problem := loss_burst_problem(self.link_loss, self.loss_burst):
-            raise ConfigError(f"ImpairmentSettings.loss_burst: {problem}")
+            raise ConfigError(f"{type(self).__name__}.loss_burst: {problem}")
+
+
+@dataclass(frozen=True)
+class ImpairmentSettings(LinkParams):
+    """SIMULATION ONLY (written by ``boundswarm sitl``): the link of the scenario's [world]
+    on the neighbour states this agent receives."""
 
     def describe(self) -> str:
         return (f"delay {self.link_delay:g} s, jitter {self.link_jitter:g} s, loss "

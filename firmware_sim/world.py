@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.draws import loss_burst_problem
+from agent.impairment import LinkParams
 from common.schema import ConfigError, setting, tables, validate
 
 
@@ -50,19 +50,11 @@ class Kill:
 
 
 @dataclass(frozen=True)
-class WorldParams:
-    """How imperfect the world is (every default: ideal)."""
+class WorldParams(LinkParams):
+    """How imperfect the world is (every default: ideal): the link of
+    :class:`agent.impairment.LinkParams` (seed, link_delay, link_jitter, link_loss,
+    loss_burst), then the robots' own imperfections."""
 
-    seed: int = setting(0, doc="seed of every random draw of the world", lo=0)
-    link_delay: float = setting(0.0, unit="s", lo=0.0, hi=5.0,
-                                doc="mean one-way age of a neighbour's state when it arrives")
-    link_jitter: float = setting(0.0, unit="s", lo=0.0, hi=5.0,
-                                 doc="standard deviation of that age")
-    link_loss: float = setting(0.0, lo=0.0, hi=0.95,
-                               doc="long-run fraction of neighbour states lost")
-    loss_burst: float = setting(1.0, unit="messages", lo=1.0,
-                                doc="mean burst length of losses (1: independent losses; "
-                                    "> 1: Gilbert-Elliott bursts)")
     wheel_slip: float = setting(0.0, lo=0.0, hi=0.5,
                                 doc="standard deviation of each wheel's slip fraction")
     encoder_noise: float = setting(0.0, unit="rev", lo=0.0,
@@ -75,9 +67,7 @@ class WorldParams:
     kill: tuple[Kill, ...] = tables(doc="agents that die ([[world.kill]] robot, at)")
 
     def __post_init__(self) -> None:
-        validate(self)
-        if problem := loss_burst_problem(self.link_loss, self.loss_burst):
-            raise ConfigError(f"WorldParams.loss_burst: {problem}")
+        super().__post_init__()
         robots = [k.robot for k in self.kill]
         if len(set(robots)) != len(robots):
             raise ConfigError(f"WorldParams.kill: a robot dies twice: {sorted(robots)}")

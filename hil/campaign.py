@@ -148,40 +148,37 @@ def _locked(folder: Path) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Ctrl-C and SIGTERM take effect when the block is done (main thread only)."""
-    got: list[int] = []
-
-    def note(signum: int, frame: Any) -> None:
-        got.append(signum)
+def _handlers(handler: Callable[[int, Any], None], *signums: int) -> Iterator[None]:
+    """``handler`` for ``signums`` during the block (nothing outside the main thread)."""
     try:
-        previous = {s: signal.signal(s, note) for s in (signal.SIGINT, signal.SIGTERM)}
+        previous = {s: signal.signal(s, handler) for s in signums}
     except ValueError:                       # not the main thread
         yield
         return
     try:
         yield
     finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-        if got:
-            raise KeyboardInterrupt
+        for s, old in previous.items():
+            signal.signal(s, old)
 
 
 @contextlib.contextmanager
-def _sigterm_interrupts() -> Iterator[None]:
-    """SIGTERM stops the campaign as Ctrl-C does (the cluster is closed on the way out)."""
-    def handler(signum: int, frame: Any) -> None:
+def _signals_deferred() -> Iterator[None]:
+    """Ctrl-C and SIGTERM take effect when the block is done (main thread only)."""
+    got: list[int] = []
+    with _handlers(lambda signum, frame: got.append(signum), signal.SIGINT, signal.SIGTERM):
+        yield
+    if got:
         raise KeyboardInterrupt
-    try:
-        previous = signal.signal(signal.SIGTERM, handler)
-    except ValueError:                       # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def _sigterm_interrupts() -> contextlib.AbstractContextManager[None]:
+    """SIGTERM stops the campaign as Ctrl-C does (the cluster is closed on the way out)."""
+    return _handlers(_interrupt, signal.SIGTERM)
 
 
 # --- Dask -------------------------------------------------------------------------------

@@ -53,9 +53,9 @@ def _typed(text: str) -> Any:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Generate, write, read the file back as a scenario, print what it holds."""
+    from hil import toml_text
     from hil.families import family_doc, micro_doc
     from hil.scenario import load_scenario
-    from hil.scene import scenario_toml
     if args.seed < 0:
         raise BadInput(f"--seed: expected an integer >= 0, got {args.seed}")
     if args.family is not None:
@@ -67,7 +67,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         how = f"--micro {args.micro}"
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(scenario_toml(doc, f"boundswarm generate {how} --seed {args.seed}"),
+    out.write_text(f"# boundswarm generate {how} --seed {args.seed}\n" + toml_text.dumps(doc),
                    encoding="utf-8")
     sc = load_scenario(out)
     console.print(f"wrote {out}: {sc.name}, {len(sc.ids)} robots, {len(sc.obstacles)} "

@@ -4,11 +4,11 @@ A :class:`Scene` holds what :mod:`hil.families` and :mod:`hil.micro_cases` draw:
 the formation's offsets and motion, and disc obstacles, in metres and radians (world frame,
 formation frame for the offsets). :meth:`Scene.doc` turns it into the plain dictionary that
 :func:`hil.scenario.parse_scenario` reads (formation as ``kind = "offsets"``), rounded to
-0.1 mm and 0.1 mrad (rates to 1e-6); :func:`scenario_toml` writes such a dictionary as TOML text.
+0.1 mm and 0.1 mrad (rates to 1e-6); :func:`hil.toml_text.dumps` writes such a dictionary
+as TOML text.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -74,37 +74,3 @@ class Scene:
 def _round(values: np.ndarray, digits: int = DIGITS) -> list[float]:
     # + 0.0 turns -0.0 into 0.0
     return [round(float(v), digits) + 0.0 for v in values]
-
-
-# --- TOML -------------------------------------------------------------------------------
-def _value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        if isinstance(value, float) and not math.isfinite(value):
-            raise ValueError(f"no TOML form for {value!r}")
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)
-    if isinstance(value, list) and not any(isinstance(v, dict) for v in value):
-        return "[" + ", ".join(_value(v) for v in value) + "]"
-    raise TypeError(f"no inline TOML form for {value!r}")
-
-
-def _is_tables(value: Any) -> bool:
-    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
-
-
-def scenario_toml(doc: dict[str, Any], comment: str = "") -> str:
-    """TOML text of a scenario document: plain values first, then tables and arrays of
-    tables (one level of nesting, as in scenario files); ``comment`` lines go on top."""
-    lines = [f"# {line}" for line in comment.splitlines()]
-    lines += [f"{k} = {_value(v)}" for k, v in doc.items()
-              if not isinstance(v, dict) and not _is_tables(v)]
-    for key, value in doc.items():
-        if isinstance(value, dict):
-            lines += ["", f"[{key}]"] + [f"{k} = {_value(v)}" for k, v in value.items()]
-        elif _is_tables(value):
-            for table in value:
-                lines += ["", f"[[{key}]]"] + [f"{k} = {_value(v)}" for k, v in table.items()]
-    return "\n".join(lines) + "\n"
