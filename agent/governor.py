@@ -86,7 +86,7 @@ def braking_speed(free: float, accel: float, reaction: float) -> float:
 def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
                  haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq, haz_half: FloatSeq,
                  haz_moving: FloatSeq, accel: float, period: float, latency: float,
-                 turn_rate: float) -> tuple[float, float]:
+                 turn_rate: float, top_speed: float = math.inf) -> tuple[float, float]:
     """(forward, backward) speed limits [m/s] (inf: none) of a robot at (x, y, theta)
     [m, m, rad] moving at (v_now [m/s], u_now [rad/s]) among hazards (centre; exclusion
     radii [m]: of the whole free distance, and of the half this robot owns (-inf: no such
@@ -101,7 +101,8 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     both wheels, so the turn rate holds) and may turn up to ``turn_rate`` [rad/s] more
     during the reaction time. A hazard counts with the cosine of its bearing's angle to the
     nearest heading of that sweep (1 inside it; none beyond 90 degrees); a moving one as if
-    its bearing were MOVING_PAD nearer, as its own motion turns the line of sight."""
+    its bearing were MOVING_PAD nearer, as its own motion turns the line of sight. Hazards
+    farther than the robot needs to stop from ``top_speed`` [m/s] are skipped."""
     fwd = bwd = math.inf
     reaction = period + latency
     ramp = 0.0 if math.isinf(accel) else accel * period   # m/s the speed may differ by in flight
@@ -109,10 +110,13 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     sweep = u_now * stop_time
     spread = 0.5 * abs(sweep) + turn_rate * reaction
     middle = theta + 0.5 * sweep
+    reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period)
     for h in range(len(haz_r)):
         dx, dy = haz_x[h] - x, haz_y[h] - y
         d = math.sqrt(dx * dx + dy * dy)
         free = min(d - haz_r[h], 0.5 * (d - haz_half[h]))
+        if free >= reach:            # cannot hold the robot below its top speed
+            continue
         bearing = math.atan2(dy, dx)
         for backward in range(2):
             heading = middle + math.pi if backward else middle

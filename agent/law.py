@@ -221,12 +221,13 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float,
     # the safety governor: no faster toward a hazard than lets the robot stop before it
     v_now, u_now = body_velocity(TWO_PI * mem.wheel_r, TWO_PI * mem.wheel_l, p.wheel_radius,
                                  p.wheel_base)
+    top = TWO_PI * p.wheel_radius * p.speed_limit      # the wheels' own limit [m/s]
     fwd = bwd = math.inf
     if p.governor:
         fwd, bwd = speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r, haz_half,
-                                haz_moving, p.accel, max(dt, p.watchdog), p.latency, p.u_max)
+                                haz_moving, p.accel, max(dt, p.watchdog), p.latency, p.u_max,
+                                top)
     allowed = fwd if v >= 0.0 else bwd
-    top = TWO_PI * p.wheel_radius * p.speed_limit      # the wheels' own limit [m/s]
     governed = allowed if abs(v) > allowed and allowed < top else math.inf
     v = min(max(v, -bwd), fwd)
 
