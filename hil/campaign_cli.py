@@ -33,9 +33,6 @@ def add_parser(sub: Subparsers) -> None:
                        help="local worker processes, one thread each (default: the CPUs)")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="run on this existing Dask cluster instead of a local one")
-    p.add_argument("--robot", metavar="FILE", action="append",
-                   help="robot profile (robots/*.toml) to run instead of the spec's profiles "
-                        "(repeat for several); not when resuming a campaign folder")
     p.add_argument("--retry-failed", action="store_true",
                    help="run again the runs that failed (raised an error) before")
     p.add_argument("--replay", metavar="RUNKEY",
@@ -57,13 +54,11 @@ def run(args: argparse.Namespace, console: Console) -> int:
         out = source
     else:
         raise BadInput("--out: required with a spec file (the campaign folder to write)")
-    if args.robot and source.is_dir():
-        raise BadInput("--robot: a campaign folder runs the profiles it was started with")
     if args.scheduler:
         campaign.check_scheduler(args.scheduler)
     if not campaign.dask_available():
         raise RuntimeError("Dask is not installed: pip install 'boundswarm[campaign]'")
-    spec = load_spec(source, profiles=args.robot)
+    spec = load_spec(source)
     outcome = campaign.run_campaign(spec, out, console, workers=args.workers,
                                     scheduler=args.scheduler, retry_failed=args.retry_failed)
     report = write_report(spec.name, outcome.rows, out, outcome.total)
@@ -106,7 +101,7 @@ def replay(args: argparse.Namespace, console: Console) -> int:
                         + toml_text.dumps(scenario_doc(run_.description)))
     code = sim_cli.run(argparse.Namespace(
         scenario=str(scenario), out=str(out), duration=None, plant=None, robot=None,
-        substeps=None, record_every=1), console)
+        substeps=None, record_every=1, strict=False), console)
     folder = Path(args.spec) if Path(args.spec).is_dir() else None
     row = campaign.read_rows(folder).get(run_.key) if folder else None
     if row and row.get("status") == "ok":

@@ -48,7 +48,6 @@ class Scenario:
     plant: PlantKind
     world: WorldParams = WorldParams()
     source: Path | None = None
-    robot_given: bool = False   # the file has a [robot] table (else RobotParams' defaults)
 
 
 TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles",
@@ -125,7 +124,7 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
                     formation=formation, ids=np.array(ids, dtype=int),
                     poses=np.array(poses, dtype=float), obstacles=obstacles,
                     sensing_range=sensing, substeps=substeps, plant=plant, world=world,
-                    source=source, robot_given="robot" in doc)
+                    source=source)
 
 
 def _formation(rd: TableReader, table: dict, n: int, control: ControlParams) -> Formation:

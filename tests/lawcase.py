@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from agent.config import ControlParams, RobotParams
+from agent.config import ControlParams
 from agent.law import LawMemory, LawParams, law_step
 from firmware_sim import compiled
 
@@ -23,7 +23,6 @@ class Case(NamedTuple):
     ref: tuple[float, float]
     nbrs: list[tuple[float, float]]
     obstacles: list[tuple[float, float, float]]
-    hazards: list[tuple[float, float, float, float, float]] = []  # x, y, full, half, moving
 
 
 class Output(NamedTuple):
@@ -31,7 +30,6 @@ class Output(NamedTuple):
     u: list[float]          # rad/s
     mode: list[int]
     memory: LawMemory
-    governed: float = float("inf")   # m/s the governor allowed when it acted
 
 
 def single(pose, ref, nbrs=(), obstacles=()) -> Case:
@@ -42,19 +40,16 @@ def single(pose, ref, nbrs=(), obstacles=()) -> Case:
                 [(float(c[0]), float(c[1]), float(r)) for c, r in obstacles])
 
 
-def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None = None,
-         robot: RobotParams | None = None) -> Output:
-    """One law step; ``robot`` None: the ideal robot (no wheel limits, infinite braking)."""
+def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None = None
+         ) -> Output:
     params = params or ControlParams()
     columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs],
                [o[0] for o in case.obstacles], [o[1] for o in case.obstacles],
-               [o[2] for o in case.obstacles], [h[0] for h in case.hazards],
-               [h[1] for h in case.hazards], [h[2] for h in case.hazards],
-               [h[3] for h in case.hazards], [h[4] for h in case.hazards])
+               [o[2] for o in case.obstacles])
     law = law_step
     if IMPL == "compiled":            # arrays, as the batch simulator passes them
         law = compiled.kernels().law_step
         columns = tuple(np.array(c, dtype=float) for c in columns)
-    v, u, mode, governed, memory = law(*case.pose, *case.ref, *columns, mem or LawMemory(),
-                                       LawParams.of(params, robot), params.period)
-    return Output([v], [u], [mode], memory, governed)
+    v, u, mode, memory = law(*case.pose, *case.ref, *columns, mem or LawMemory(),
+                             LawParams.of(params), params.period)
+    return Output([v], [u], [mode], memory)
