@@ -33,6 +33,9 @@ def add_parser(sub: Subparsers) -> None:
                        help="local worker processes, one thread each (default: the CPUs)")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="run on this existing Dask cluster instead of a local one")
+    p.add_argument("--robot", metavar="FILE", action="append",
+                   help="robot profile (robots/*.toml) to run instead of the spec's profiles "
+                        "(repeat for several); not when resuming a campaign folder")
     p.add_argument("--retry-failed", action="store_true",
                    help="run again the runs that failed (raised an error) before")
     p.add_argument("--replay", metavar="RUNKEY",
@@ -54,11 +57,13 @@ def run(args: argparse.Namespace, console: Console) -> int:
         out = source
     else:
         raise BadInput("--out: required with a spec file (the campaign folder to write)")
+    if args.robot and source.is_dir():
+        raise BadInput("--robot: a campaign folder runs the profiles it was started with")
     if args.scheduler:
         campaign.check_scheduler(args.scheduler)
     if not campaign.dask_available():
         raise RuntimeError("Dask is not installed: pip install 'boundswarm[campaign]'")
-    spec = load_spec(source)
+    spec = load_spec(source, profiles=args.robot)
     outcome = campaign.run_campaign(spec, out, console, workers=args.workers,
                                     scheduler=args.scheduler, retry_failed=args.retry_failed)
     report = write_report(spec.name, outcome.rows, out, outcome.total)

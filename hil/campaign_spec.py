@@ -93,12 +93,16 @@ def families_module() -> Any:
                            f"{exc}") from None
 
 
-def load_spec(path: str | Path, check_families: bool = True) -> CampaignSpec:
-    """Read, validate and expand the spec at ``path`` (a file, or a campaign folder)."""
+def load_spec(path: str | Path, check_families: bool = True,
+              profiles: list[str] | None = None) -> CampaignSpec:
+    """Read, validate and expand the spec at ``path`` (a file, or a campaign folder);
+    ``profiles`` (robot profile files) replace the spec's own."""
     path = Path(path)
     if path.is_dir():
         path = path / SPEC_COPY
     doc = load_toml(path, "campaign spec", ScenarioError)
+    if profiles:
+        doc["profiles"] = [str(Path(p).resolve()) for p in profiles]
     return parse_spec(doc, str(path), path.parent, source=path, check_families=check_families)
 
 

@@ -110,6 +110,15 @@ hysteresis = [0.0, 0.5]
 """
 
 
+def test_robot_profiles_given_on_the_command_line_replace_the_specs(tmp_path, families):
+    from hil.campaign_spec import load_spec
+    root = Path(__file__).resolve().parent.parent
+    spec = load_spec(write_spec(tmp_path, CROSSED),
+                     profiles=[str(root / "robots" / "ideal.toml")])
+    assert {r.description["profile"] for r in spec.runs} == {"ideal"}
+    assert len(spec.runs) == 144 // 2
+
+
 def test_a_spec_crosses_its_values_into_runs_with_stable_keys(tmp_path, families):
     from hil.campaign_spec import load_spec, run_key
     spec = load_spec(write_spec(tmp_path, CROSSED))
