@@ -26,7 +26,7 @@ from common.payloads import WheelsMsg
 from firmware_sim.odrive_sim import DriverPair
 from firmware_sim.sitl_plant import PlantRobot, SitlPlant
 from transport.canbus import open_bus
-from transport.zenoh_link import Keys, Latest, open_session, session_config
+from transport.zenoh_link import Arrivals, Keys, open_session, session_config
 
 log = logging.getLogger(__name__)
 
@@ -83,13 +83,15 @@ def run_drivers_only(drivers: DriverPair, rate: float = 200.0,
 
 
 class RemoteWheels:
-    """A robot's wheels whose drivers run on another host (they publish WheelsMsg): the
-    latest positions and speeds (speeds zero once older than ``stale`` seconds)."""
+    """A robot's wheels whose drivers run on another host (they publish WheelsMsg): every
+    report, in order (:class:`firmware_sim.sitl_plant.WheelReports`); as drivers of the
+    plant, nothing to serve or advance here."""
 
-    def __init__(self, cache: Latest, robot_id: int, clock: Callable[[], float],
-                 stale: float = 0.1):
-        self.cache, self.robot_id, self.clock, self.stale = cache, robot_id, clock, stale
-        self.stamp: float | None = None       # wall time [s] of the report last read
+    def __init__(self, arrivals: Arrivals[WheelsMsg], robot_id: int):
+        self.arrivals, self.robot_id = arrivals, robot_id
+
+    def reports(self) -> list[tuple[float, float, float]]:
+        return [(m.stamp, m.right_pos, m.left_pos) for m in self.arrivals.take(self.robot_id)]
 
     def fileno(self) -> None:
         """No bus here: the drivers are remote."""
@@ -100,22 +102,11 @@ class RemoteWheels:
     def step(self, dt: float) -> None:
         """Nothing to advance: the drivers are remote."""
 
-    def wheel_state(self) -> tuple[float, float, float, float] | None:
-        got = self.cache.snapshot().get(self.robot_id)
-        if got is None:
-            return None          # not heard from yet: the robot stays where it is
-        m = got.msg
-        self.stamp = m.stamp
-        if self.clock() - m.stamp > self.stale:
-            return m.right_pos, m.left_pos, 0.0, 0.0
-        return m.right_pos, m.left_pos, m.right_vel, m.left_vel
-
-    def reported_at(self) -> float | None:
-        """Wall time [s] of the report last read (None before the first)."""
-        return self.stamp
+    def wheel_state(self) -> None:
+        """Not read: the plant rolls a remote robot through its :meth:`reports`."""
 
     def close(self) -> None:
-        """The cache is closed by its owner."""
+        """The subscription is closed by its owner."""
 
 
 def _pose(pose: Iterable[float]) -> tuple[float, float, float]:
@@ -167,13 +158,14 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005, realtime_priority: 
     keys = Keys(swarm)
     session = open_session(conf, "the world")
     try:
-        cache = Latest(session, keys.wheels("*"), WheelsMsg.decode, clock.wall,
-                       capacity=64 * len(scenario.ids))
-        wheels = [RemoteWheels(cache, int(rid), clock.wall) for rid in scenario.ids]
-        robots = [PlantRobot(w.robot_id, _pose(pose), w, reported_at=w.reported_at)
+        # a second of reports of every robot fits (a stalled link delivers in a burst)
+        arrivals = Arrivals(session, keys.wheels("*"), WheelsMsg.decode,
+                            capacity=256 * len(scenario.ids))
+        wheels = [RemoteWheels(arrivals, int(rid)) for rid in scenario.ids]
+        robots = [PlantRobot(w.robot_id, _pose(pose), w, remote=w)
                   for w, pose in zip(wheels, scenario.poses)]
         stats = _run_plant(session, keys, robots, scenario, dt, clock, realtime_priority)
-        cache.close()
+        arrivals.close()
         return stats
     finally:
         session.close()

@@ -58,9 +58,17 @@ class DriverPair(Protocol):
     def step(self, dt: float) -> None: ...              # advance the axes by dt [s]
     def wheel_state(self) -> tuple[float, float, float, float] | None: ...
     # (right, left) positions [rev], then (right, left) actual speeds [rev/s]; None while
-    # nothing is known yet (remote drivers not heard from). The plant reads the speeds of
-    # local drivers and the positions of remote ones (PlantRobot.reported_at).
+    # nothing is known yet. The plant reads the speeds of local drivers.
     def close(self) -> None: ...
+
+
+class WheelReports(Protocol):
+    """The reports of a robot's drivers that run on another host (multi-host world)."""
+
+    def reports(self) -> list[tuple[float, float, float]]: ...
+    # (stamp [s], right, left positions [rev]) of each report since the last call, oldest
+    # first: the plant rolls the robot through every one, so a late burst of reports moves
+    # it along the path its wheels took, not along one arc from the first to the last
 
 
 @dataclass
@@ -70,12 +78,13 @@ class PlantRobot:
     drivers: DriverPair
     v: float = 0.0            # m/s, actual (held over the last physics step)
     u: float = 0.0            # rad/s, actual (held over the last physics step)
-    # remote drivers (multi-host world): the wall time [s] of their last report. The robot
-    # rolls through the arc its wheels' reported positions turned since the last report (a
-    # late or lost report delays the motion but never loses it), and its truth is stamped
-    # at the report: where the robot was then, not a late view of it stamped now
-    reported_at: Callable[[], float | None] | None = None
+    # remote drivers (multi-host world): the robot rolls through the arc its wheels turned
+    # between each two reports (a late report delays the motion, a lost one merges two
+    # arcs, none loses it), and its truth is stamped at the last report: where the robot
+    # was then, not a late view of it stamped now
+    remote: WheelReports | None = None
     last_turns: tuple[float, float] | None = None     # rev, (right, left) last applied
+    reported_at: float | None = None                  # s, wall time of the last report
 
 
 class SitlPlant:
@@ -126,14 +135,15 @@ class SitlPlant:
         waiting = {fd for fd, _ in self._poll.poll(0)} if self._fds else ()
         for j, rb in enumerate(self.robots):
             fd = self._fds.get(rb.robot_id)
+            grip = (1.0 - slip[j, 0], 1.0 - slip[j, 1]) if slip is not None else None
+            if rb.remote is not None:
+                for stamp, right, left in rb.remote.reports():
+                    self._roll_to(rb, stamp, right, left, grip)
+                continue
             rb.drivers.service(now_m, receive=fd is None or fd in waiting)
             rb.drivers.step(dt)
             state = rb.drivers.wheel_state()
             if state is None:
-                continue
-            grip = (1.0 - slip[j, 0], 1.0 - slip[j, 1]) if slip is not None else None
-            if rb.reported_at is not None:
-                self._roll_to(rb, state[0], state[1], dt, grip)
                 continue
             _, _, right, left = state            # speeds at the step's end [rev/s]
             if grip is not None:                 # the ground moves by (1 - s) of the turn
@@ -146,9 +156,10 @@ class SitlPlant:
         if self._steps % self.truth_every == 0:
             self._seq += 1
             for rb in self.robots:
-                stamp = rb.reported_at() if rb.reported_at is not None else None
+                at = rb.reported_at if rb.remote is not None else None
                 self.publish("truth", rb.robot_id,
-                             TruthMsg(rb.robot_id, self._seq, stamp or now_w, *rb.pose,
+                             TruthMsg(rb.robot_id, self._seq, now_w if at is None else at,
+                                      *rb.pose,
                                       rb.v, rb.u).encode())
         if now_m >= self._next_obstacles:
             self._next_obstacles = now_m + self.obstacles_period
@@ -166,12 +177,14 @@ class SitlPlant:
                                                w.wheel_slip, key, wheel, self._slip_next)
             self._slip_next += 1
 
-    def _roll_to(self, rb: PlantRobot, right: float, left: float, dt: float,
+    def _roll_to(self, rb: PlantRobot, stamp: float, right: float, left: float,
                  grip: tuple[float, float] | None = None) -> None:
         """Move ``rb`` through the arc its wheels turned from ``rb.last_turns`` to (right,
-        left) [rev], the ground moving by ``grip`` (right, left) of each turn (None: 1)."""
+        left) [rev], reported at ``stamp`` [s], the ground moving by ``grip`` (right, left)
+        of each turn (None: 1)."""
         last, rb.last_turns = rb.last_turns, (right, left)
-        if last is None:
+        since, rb.reported_at = rb.reported_at, stamp
+        if last is None or since is None:
             return
         r = self.params
         turn_r, turn_l = right - last[0], left - last[1]
@@ -179,7 +192,9 @@ class SitlPlant:
             turn_r, turn_l = turn_r * grip[0], turn_l * grip[1]
         dist, dtheta = body_velocity(TWO_PI * turn_r, TWO_PI * turn_l,
                                      r.wheel_radius, r.wheel_base)
-        rb.v, rb.u = dist / dt, dtheta / dt
+        span = stamp - since
+        if span > 0.0:
+            rb.v, rb.u = dist / span, dtheta / span
         rb.pose = arc_step(*rb.pose, dist, dtheta)
 
     def publish_obstacles(self, now_w: float) -> None:

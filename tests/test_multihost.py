@@ -340,7 +340,8 @@ def _write_atomic(path: Path, text: str) -> None:
 
 def brief(m: dict) -> dict:
     return {k: m[k] for k in ("convergence_time", "final_max_tracking_error", "stuck_robots",
-                              "min_pair_distance", "min_obstacle_clearance", "collisions")}
+                              "min_pair_distance", "min_obstacle_clearance", "collisions",
+                              "max_pose_error")}
 
 
 def test_swarm_across_hosts_with_tls(tmp_path):

@@ -224,47 +224,65 @@ def test_sitl_plant_reads_only_the_buses_with_frames_waiting():
         plant.close()
 
 
-class _LateReports(_Wheels):
-    """Remote drivers whose reports reach the world only every ``every`` steps (the
-    positions of the last report in between)."""
+class _RemoteReports:
+    """Remote drivers whose wheels turn at (right, left) [rev/s], the right one reversing
+    every 10 steps of 5 ms, reported each step (stamped 100 s + its time) and delivered to
+    the world in bursts of ``every`` reports; ``keep_last``: only the last of each burst
+    arrives (the others lost)."""
 
-    def __init__(self, right, left, every):
-        super().__init__(right, left)
-        self.every, self.reported = every, None
+    def __init__(self, right, left, every, keep_last=False):
+        self.speeds, self.every, self.keep_last = (right, left), every, keep_last
+        self.k, self.pos, self.queued = 0, [0.25, -0.5], []
+
+    def reports(self):
+        self.k += 1
+        right = self.speeds[0] * (1 if (self.k // 10) % 2 == 0 else -1)
+        self.pos = [self.pos[0] + right * 0.005, self.pos[1] + self.speeds[1] * 0.005]
+        self.queued.append((100.0 + 0.005 * self.k, *self.pos))
+        if self.k % self.every:
+            return []
+        burst, self.queued = self.queued, []
+        return burst[-1:] if self.keep_last else burst
+
+    def fileno(self):
+        return None
+
+    def service(self, now, receive=True):
+        raise AssertionError("remote drivers are not served by the world")
+
+    def step(self, dt):
+        raise AssertionError("remote drivers are not advanced by the world")
 
     def wheel_state(self):
-        if self.reported is None or self.k % self.every == 0:
-            self.reported = (*self.pos, *self.speeds)
-        return self.reported
+        raise AssertionError("the world rolls a remote robot through its reports")
+
+    def close(self):
+        pass
 
 
-def test_remote_robot_rolls_through_its_reported_wheel_turns_late_or_not():
-    """A world whose drivers are on other hosts: late reports delay the motion but never
-    lose it (the robot ends where its wheels' turns put it)."""
+def test_remote_robot_rolls_through_every_report_late_or_not():
+    """A world whose drivers are on other hosts: reports that arrive late, in a burst, move
+    the robot along the path its wheels took (not one arc from the first to the last), and
+    its truth is stamped when its wheels were last reported, not now."""
+    from common.payloads import TruthMsg
     from firmware_sim.sitl_plant import PlantRobot
 
-    robot = RobotParams()
+    def remote(rid, drivers):
+        return PlantRobot(rid, (0.0, 0.0, 0.3), drivers, remote=drivers)
+
+    prompt = remote(1, _RemoteReports(2.0, 1.0, every=1))
+    late = remote(2, _RemoteReports(2.0, 1.0, every=12))
+    merged = remote(3, _RemoteReports(2.0, 1.0, every=12, keep_last=True))
     sent = []
-    prompt = PlantRobot(1, (0.0, 0.0, 0.3), _LateReports(2.0, 1.0, every=1),
-                        reported_at=lambda: 50.0)
-    late = PlantRobot(2, (0.0, 0.0, 0.3), _LateReports(2.0, 1.0, every=7),
-                      reported_at=lambda: 60.0)
-    plant = _plant([prompt, late], robot, sent)
-    for k in range(42):
-        plant.step(0.005, 0.005 * k, 100.0 + 0.005 * k)
+    plant = _plant([prompt, late, merged], RobotParams(), sent)
+    for k in range(60):
+        plant.step(0.005, 0.005 * k, 200.0 + 0.005 * k)
     assert late.pose == pytest.approx(prompt.pose, abs=1e-12)
-    # its truth is stamped when its wheels were reported where they put it, not now
-    from common.payloads import TruthMsg
+    assert np.hypot(merged.pose[0] - prompt.pose[0], merged.pose[1] - prompt.pose[1]) > 0.01
+    assert np.hypot(prompt.pose[0], prompt.pose[1]) > 0.15                 # it did move
     stamps = {TruthMsg.decode(d).robot_id: TruthMsg.decode(d).stamp
               for kind, _, d in sent if kind == "truth"}
-    assert stamps == {1: 50.0, 2: 60.0}
-    assert prompt.pose[0] > 0.3                        # it did move (~0.4 m)
-    # the speed-driven robot of the same wheels agrees with the position-driven ones
-    local = PlantRobot(3, (0.0, 0.0, 0.3), _Wheels(2.0, 1.0))
-    plant = _plant([local], robot)
-    for k in range(42):
-        plant.step(0.005, 0.005 * k, 100.0 + 0.005 * k)
-    assert local.pose == pytest.approx(prompt.pose, abs=0.02)
+    assert stamps == {1: pytest.approx(100.3), 2: pytest.approx(100.3), 3: pytest.approx(100.3)}
 
 
 def test_truth_between_late_reports_is_interpolated():

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import threading
 import time
 from collections import Counter
@@ -208,6 +209,48 @@ class Latest(Generic[M]):
         with self._lock:
             sub, self._sub = self._sub, None
         if sub is not None:            # outside the lock: a snapshot never waits on Zenoh
+            sub.undeclare()
+
+
+class Arrivals(Generic[M]):
+    """Every valid message on a key expression, per robot id in the order of their stamps,
+    kept until taken: for a consumer that must not skip any (the multi-host world rolls a
+    robot through each of its wheel reports). Samples wait in a bounded ring as in
+    :class:`Latest`; one older than a robot's last accepted stamp is dropped
+    (``out_of_order``). Single-threaded: drained by :meth:`take` only."""
+
+    def __init__(self, session: zenoh.Session, key: str, decode: Callable[[bytes], M],
+                 capacity: int = 1024):
+        self._decode = decode
+        self._pending: dict[int, list[M]] = {}
+        self._stamp: dict[int, float] = {}
+        self.received = 0
+        self.dropped: Counter = Counter()
+        self._sub: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = (
+            session.declare_subscriber(key, zenoh.handlers.RingChannel(capacity)))
+
+    def take(self, robot_id: int) -> list[M]:
+        """The messages of ``robot_id`` that arrived since the last take, oldest first."""
+        sub = self._sub
+        while sub is not None and (sample := sub.try_recv()) is not None:
+            self.received += 1
+            try:
+                msg = self._decode(sample.payload.to_bytes())
+            except PayloadError as exc:
+                self.dropped[exc.reason] += 1
+                continue
+            rid, stamp = getattr(msg, "robot_id", 0), getattr(msg, "stamp", 0.0)
+            if stamp <= self._stamp.get(rid, -math.inf):
+                self.dropped["out_of_order"] += 1
+                continue
+            self._stamp[rid] = stamp
+            self._pending.setdefault(rid, []).append(msg)
+        return self._pending.pop(robot_id, [])
+
+    def close(self) -> None:
+        """Undeclare the subscription."""
+        sub, self._sub = self._sub, None
+        if sub is not None:
             sub.undeclare()
 
 
