@@ -31,7 +31,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/boundswarm sitl scenarios/paper.toml --out runs/paper
+	$(BIN)/boundswarm sitl scenarios/paper.toml --robot robots/ideal.toml --out runs/paper
 
 sim: $(STAMP)
 	$(BIN)/boundswarm sim scenarios/paper.toml --out runs/paper-sim

@@ -7,14 +7,11 @@ K_ij, a, b, c for the potential).
 """
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 
 from common import drivers
 from common.schema import ConfigError, parameters, setting, validate
-
-log = logging.getLogger(__name__)
 
 
 def _param(default: float, unit: str, doc: str, open_lo: bool = True, param: str | None = None,
@@ -42,6 +39,12 @@ class ControlParams:
     u_max: float = _param(3.0 * math.pi, "rad/s", "clip of the angular speed |u|")
     hysteresis: float = _param(0.5, "m", "leave neighbour-AVOID only beyond b + hysteresis",
                                open_lo=False, param="HYST")
+    share_age: float = _param(0.1, "s", "the safety governor shares the free distance to a "
+                              "neighbour only while its data is younger than this",
+                              open_lo=False, param="SHARE_AGE")
+    governor: bool = setting(True, doc="the safety governor limits the speed so that the "
+                             "robot can stop before every hazard (false: the law alone, for "
+                             "comparisons)")
 
     def __post_init__(self) -> None:
         validate(self)
@@ -94,47 +97,32 @@ class RobotParams:
 
 
 @dataclass(frozen=True)
-class BrakingMargin:
-    """The braking-margin budget (docs/controller.md), all in metres."""
+class SpeedEnvelope:
+    """What the safety governor (agent.governor) lets a robot do, for a statement at start."""
 
-    v_max: float          # m/s, fastest the robot is commanded and can go
-    reaction: float       # m, v_max * T_eff
-    stopping: float       # m, v_max^2 / (2 a_max)
-    budget: float         # m, (b - a) / 2
-
-    @property
-    def ok(self) -> bool:
-        return self.reaction + self.stopping <= self.budget
+    top: float          # m/s, the fastest it is commanded and can go (K D_max, its wheels)
+    head_on: float      # m/s, the fastest the governor allows toward a robot just sensed
+    sensing_range: float  # m
+    data_age: float     # s, the expected age of neighbour data
 
     def describe(self) -> str:
-        verdict = "within" if self.ok else "EXCEEDS"
-        return (f"braking margin: v_max*T_eff + v_max^2/(2 a_max) = {self.reaction:.3f} + "
-                f"{self.stopping:.3f} = {self.reaction + self.stopping:.3f} m {verdict} "
-                f"(b - a)/2 = {self.budget:.3f} m (v_max = {self.v_max:.2f} m/s)")
+        verdict = ("never limits driving in the open" if self.head_on >= self.top else
+                   f"limits the robot to {self.head_on:.2f} m/s toward a robot it has just "
+                   f"sensed {self.sensing_range:g} m away")
+        return (f"safety governor: top speed {self.top:.2f} m/s; with neighbour data "
+                f"{self.data_age * 1e3:.0f} ms old it {verdict}")
 
 
-def braking_margin(control: ControlParams, robot: RobotParams,
-                   data_age: float = 0.0) -> BrakingMargin:
-    """Budget check (docs/controller.md): v_max*T_eff + v_max^2/(2 a_max) <= (b - a)/2.
-
-    ``data_age`` [s] is the age of neighbour data that extrapolation does not remove; the
-    effective reaction time is ``control.period + data_age + robot.drive_latency``.
-    """
-    v = min(control.v_max, robot.v_wheel_max)
-    reaction = control.period + data_age + robot.drive_latency
-    return BrakingMargin(v_max=v, reaction=v * reaction, stopping=v * v / (2.0 * robot.a_max),
-                         budget=(control.b - control.a) / 2)
-
-
-def check_braking_margin(control: ControlParams, robot: RobotParams, data_age: float = 0.0,
-                         strict: bool = False) -> BrakingMargin:
-    """Warn (or raise :class:`ConfigError` when ``strict``) if the braking margin is broken."""
-    margin = braking_margin(control, robot, data_age)
-    if not margin.ok:
-        if strict:
-            raise ConfigError(margin.describe() + "; lower K*D_max or raise the wheel ramp")
-        log.warning("%s; collision avoidance is not guaranteed", margin.describe())
-    return margin
+def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: float,
+                   data_age: float = 0.0) -> SpeedEnvelope:
+    """The governor's speed toward a robot met head-on at the edge of the sensing range
+    [m]: each robot owns half the gap beyond a, less what the other travels in the data's
+    age [s] at the top speed, and must stop in it after a period and the drive latency."""
+    from agent.governor import braking_speed
+    top = min(control.v_max, robot.v_wheel_max)
+    free = 0.5 * (sensing_range - control.a) - top * data_age
+    head_on = braking_speed(free, robot.a_max, control.period + robot.drive_latency)
+    return SpeedEnvelope(top, head_on, sensing_range, data_age)
 
 
 CONTROL_PARAMS = parameters(ControlParams, "BS_")

@@ -27,6 +27,8 @@ from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import SwarmPort
 from common.schema import ConfigError, setting, validate
 
+STALE_MARGIN = 0.1   # s beyond a link's delay and jitter before a neighbour counts as silent
+
 
 @dataclass(frozen=True)
 class LinkParams:
@@ -48,6 +50,12 @@ class LinkParams:
         validate(self)
         if problem := loss_burst_problem(self.link_loss, self.loss_burst):
             raise ConfigError(f"{type(self).__name__}.loss_burst: {problem}")
+
+    def staleness(self, at_least: float) -> float:
+        """The staleness limit [s] for agents on this link: at least ``at_least`` [s], and
+        longer than the link's delay (with four jitters and STALE_MARGIN), so that a robot
+        that is alive is not taken for a silent one."""
+        return max(at_least, self.link_delay + 4.0 * self.link_jitter + STALE_MARGIN)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,10 @@ Every period the robot picks one of three modes:
 * TRACK (Theorem 1) otherwise: e = p - p_d, theta_d = atan2(-e), u = -K_theta e_theta +
   theta_d_hat_dot, v = K cos(e_theta) min(D_max, |e|).
 
-Finally |u| is clipped to u_max; |v| <= K D_max holds by construction.
+Then |u| is clipped to u_max (|v| <= K D_max holds by construction), the safety governor
+(:mod:`agent.governor`) lowers |v| only as far as needed for the robot to stop before every
+hazard, and the command is brought within what the wheel drivers can follow: the wheel speed
+limit (curvature kept) and the ramp from the last command. Nothing after the law clips it.
 
 The law is pure, for one robot, in plain floats: an agent runs it interpreted every period
 (numpy's cost per call would dominate for one robot), and the batch simulator compiles this
@@ -38,8 +41,10 @@ from agent.avoidance import (
     segment_distance,
     tangent_side,
 )
-from agent.config import ControlParams
-from agent.kinematics import wrap_angle
+from agent.config import ControlParams, RobotParams
+from agent.governor import speed_limits
+from agent.kinematics import TWO_PI, body_velocity, wheel_command, wrap_angle
+from common import drivers
 from common.vocabulary import Mode
 
 if TYPE_CHECKING:
@@ -59,11 +64,25 @@ class LawParams(NamedTuple):
     c: float            # m
     u_max: float        # rad/s
     hysteresis: float   # m
+    accel: float        # m/s^2, braking deceleration (inf: an ideal robot)
+    latency: float      # s, from a command to the drivers applying it
+    wheel_radius: float  # m
+    wheel_base: float   # m
+    speed_limit: float  # rev/s per wheel (inf: none)
+    ramp: float         # rev/s^2 per wheel (inf: none)
+    watchdog: float     # s the drivers go on with the last command should the agent die
+    governor: bool      # the safety governor acts
 
     @classmethod
-    def of(cls, control: ControlParams) -> "LawParams":
+    def of(cls, control: ControlParams, robot: RobotParams | None) -> "LawParams":
+        """The law's view of the controller and of the robot (None: an ideal robot, whose
+        wheels follow any command at once)."""
+        inf = math.inf
+        limits = ((robot.a_max, robot.drive_latency, robot.wheel_radius, robot.wheel_base,
+                   robot.wheel_speed_limit, robot.wheel_ramp, drivers.WATCHDOG)
+                  if robot is not None else (inf, 0.0, 1.0, 1.0, inf, inf, 0.0))
         return cls(control.K, control.K_theta, control.D_max, control.K_ij, control.b,
-                   control.c, control.u_max, control.hysteresis)
+                   control.c, control.u_max, control.hysteresis, *limits, control.governor)
 
 
 class LawMemory(NamedTuple):
@@ -77,17 +96,24 @@ class LawMemory(NamedTuple):
     center_x: float = 0.0       # m, centre of the obstacle being circled
     center_y: float = 0.0       # m
     radius: float = 0.0         # m
+    wheel_r: float = 0.0        # rev/s, the right wheel's last set-point
+    wheel_l: float = 0.0        # rev/s, the left wheel's
 
 
 def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float,
              nbr_x: FloatSeq, nbr_y: FloatSeq, obs_x: FloatSeq, obs_y: FloatSeq,
-             obs_r: FloatSeq, mem: LawMemory, p: LawParams,
-             dt: float) -> tuple[float, float, int, LawMemory]:
-    """One period for one robot: (v [m/s], u [rad/s], mode (a :class:`Mode` value), memory).
+             obs_r: FloatSeq, haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq,
+             haz_half: FloatSeq, haz_moving: FloatSeq, mem: LawMemory, p: LawParams,
+             dt: float) -> tuple[float, float, int, float, LawMemory]:
+    """One period for one robot: (v [m/s], u [rad/s], mode (a :class:`Mode` value), the
+    speed [m/s] the governor allowed when it lowered the command (inf: it did not), memory).
 
     (x, y, theta) is the robot's pose, (ref_x, ref_y) its reference p_d(t); ``nbr_x``,
     ``nbr_y`` the neighbours in range (extrapolated to now); ``obs_x``, ``obs_y``, ``obs_r``
-    the obstacles in range (centre and radius); ``dt`` [s] the time since the last step.
+    the obstacles in range (centre and radius); ``haz_*`` the governor's hazards (centre,
+    exclusion radii [m] of the whole and of the half free distance, moving or not:
+    :mod:`agent.governor`); ``dt`` [s]
+    the time since the last step.
     """
     # TRACK for everyone: error and its finite-difference heading rate (Assumption 2)
     ex, ey = x - ref_x, y - ref_y
@@ -191,4 +217,39 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float,
     e_theta = 0.0 if dist < EPS else wrap_angle(theta - theta_d)
     v = p.K * math.cos(e_theta) * min(p.D_max, dist)
     u = min(max(-p.K_theta * e_theta + ff, -p.u_max), p.u_max)
-    return v, u, mode, LawMemory(ex, ey, True, avoiding, side, center_x, center_y, radius)
+
+    # the safety governor: no faster toward a hazard than lets the robot stop before it
+    v_now, u_now = body_velocity(TWO_PI * mem.wheel_r, TWO_PI * mem.wheel_l, p.wheel_radius,
+                                 p.wheel_base)
+    top = TWO_PI * p.wheel_radius * p.speed_limit      # the wheels' own limit [m/s]
+    fwd = bwd = math.inf
+    if p.governor:
+        fwd, bwd = speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r, haz_half,
+                                haz_moving, p.accel, max(dt, p.watchdog), p.latency, p.u_max,
+                                top)
+    allowed = fwd if v >= 0.0 else bwd
+    governed = allowed if abs(v) > allowed and allowed < top else math.inf
+    v = min(max(v, -bwd), fwd)
+
+    # what the wheels can follow: their speed limit, then their ramp from the last command;
+    # slowing down comes first and turning gets the ramp left over (the governor counts on
+    # braking at the full ramp)
+    wr, wl = mem.wheel_r, mem.wheel_l
+    if not (math.isinf(p.speed_limit) and math.isinf(p.ramp)):
+        tr, tl = wheel_command(v, u, p.wheel_radius, p.wheel_base, p.speed_limit)
+        change = p.ramp * dt
+        slowing = (tr + tl) * math.copysign(1.0, wr + wl) < abs(wr + wl)
+        if not slowing and math.isinf(governed):
+            wr += min(max(tr - wr, -change), change)
+            wl += min(max(tl - wl, -change), change)
+        else:
+            common = min(max(0.5 * (tr + tl - wr - wl), -change), change)
+            left = change - abs(common)
+            turn = min(max(0.5 * (tr - tl - wr + wl), -left), left)
+            wr, wl = wr + common + turn, wl + common - turn
+        # within the speed limit (a set-point already at it may not step beyond)
+        wr = min(max(wr, -p.speed_limit), p.speed_limit)
+        wl = min(max(wl, -p.speed_limit), p.speed_limit)
+        v, u = body_velocity(TWO_PI * wr, TWO_PI * wl, p.wheel_radius, p.wheel_base)
+    return v, u, mode, governed, LawMemory(ex, ey, True, avoiding, side, center_x, center_y,
+                                           radius, wr, wl)

@@ -22,17 +22,19 @@ import logging
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from agent.config import CONTROL_PARAMS
 from agent.formation import Formation
+from agent.governor import neighbour_hazard
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step
 from agent.loop import Clock
 from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry
+from common import drivers
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import MotorPort, SwarmPort
 from common.schema import ConfigError, Param
@@ -54,11 +56,17 @@ class AgentCounters:
     failsafes: int = 0
     nonfinite_commands: int = 0
     neighbour_age: deque = field(default_factory=lambda: deque(maxlen=20000))  # s
+    law_steps: int = 0
+    governed: int = 0                    # law steps in which the governor lowered the speed
+    governor_min_allowed: float = math.inf   # m/s
 
     def summary(self) -> dict:
         ages = np.asarray(self.neighbour_age) * 1e3
         return {"ticks": self.ticks, "failsafes": self.failsafes,
                 "nonfinite_commands": self.nonfinite_commands,
+                "governor_share": self.governed / self.law_steps if self.law_steps else 0.0,
+                "governor_min_allowed": (self.governor_min_allowed
+                                         if math.isfinite(self.governor_min_allowed) else None),
                 "neighbour_age_ms": {
                     "p50": float(np.percentile(ages, 50)) if ages.size else None,
                     "p99": float(np.percentile(ages, 99)) if ages.size else None,
@@ -71,7 +79,7 @@ class Agent:
     def __init__(self, settings: AgentSettings, motor: MotorPort, swarm: SwarmPort,
                  clock: Clock):
         self.s = settings
-        self._law_params = LawParams.of(settings.control)   # the law's view of s.control
+        self._law_params = LawParams.of(settings.control, settings.robot)   # the law's view
         self.motor, self.swarm, self.clock = motor, swarm, clock
         self.mode = AgentMode.DISARMED
         self.failsafe: str | None = None
@@ -82,6 +90,7 @@ class Agent:
         self.last_feedback: WheelFeedback | None = None
         self.command = (0.0, 0.0)          # (v [m/s], u [rad/s]) after saturation
         self.law_mode = Mode.TRACK
+        self.governed = False              # the governor lowered the speed this period
         x0, y0, _ = settings.initial_pose
         self.reference = (float(x0), float(y0))   # m
         self._seq = 0
@@ -139,9 +148,10 @@ class Agent:
         if spec.read_only is not None:
             return f"{name} is {spec.read_only}"
         try:
-            control = dataclasses.replace(self.s.control, **{spec.field: float(value)})
+            changes: dict[str, Any] = {spec.field: float(value)}
+            control = dataclasses.replace(self.s.control, **changes)
             self.s = dataclasses.replace(self.s, control=control)
-            self._law_params = LawParams.of(control)
+            self._law_params = LawParams.of(control, self.s.robot)
         except ConfigError as exc:
             return f"{name} = {value:g} refused: {exc}"
         log.info("robot %d: %s = %g", self.s.robot_id, name, self.param(name))
@@ -166,6 +176,7 @@ class Agent:
         # update
         v = u = 0.0
         self.law_mode = Mode.TRACK
+        self.governed = False
         if self.mode is not AgentMode.DISARMED:
             self._check_feedback(fb, now_m)
             if self.mode is AgentMode.FORMATION and self.failsafe is None and not self._arming:
@@ -174,7 +185,9 @@ class Agent:
         else:
             self._last_law = None
 
-        # write
+        # write (the law's command is within the wheels' limit and ramp already: wheel_command
+        # only converts it; a HOLD's zero is ramped by the drivers)
+        right = left = 0.0
         if self.mode is not AgentMode.DISARMED:
             r = self.s.robot
             right, left = wheel_command(v, u, r.wheel_radius, r.wheel_base,
@@ -188,6 +201,7 @@ class Agent:
             self.command = (v_sat, u_sat)
         else:
             self.command = (0.0, 0.0)
+        self.memory = self.memory._replace(wheel_r=right, wheel_l=left)   # the law ramps on
         self._publish(pose, now_w)
 
     def _check_feedback(self, fb: WheelFeedback | None, now_m: float) -> None:
@@ -247,13 +261,58 @@ class Agent:
             return 0.0, 0.0
         self.reference = formation.point(0, now_w - mission.epoch)[:2]
         near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
+        hazards = self._hazards(neighbours, obs_x, obs_y, obs_r, len(near.stale_x), now_w)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
-        v, u, mode, self.memory = law_step(
+        v, u, mode, governed, self.memory = law_step(
             *pose, *self.reference, near.fresh_x, near.fresh_y, obs_x, obs_y, obs_r,
-            self.memory, self._law_params, max(dt, 1e-6))
+            *hazards, self.memory, self._law_params, max(dt, 1e-6))
         self.law_mode = Mode(mode)
+        self.counters.law_steps += 1
+        self.governed = math.isfinite(governed)
+        if self.governed:
+            self.counters.governed += 1
+            self.counters.governor_min_allowed = min(self.counters.governor_min_allowed,
+                                                     governed)
         return v, u
+
+    def _hazards(self, neighbours: Mapping[int, Received[StateMsg]], obs_x: list[float],
+                 obs_y: list[float], obs_r: list[float], n_stale: int, now_w: float
+                 ) -> tuple[list[float], list[float], list[float], list[float], list[float]]:
+        """The safety governor's hazards (agent.governor): every neighbour heard from at its
+        reported position, grown by its data's age, and the detected obstacles grown by a
+        (``obs_*`` without their last ``n_stale`` entries: stale robots, which are among
+        the neighbours)."""
+        s, r = self.s, self.s.robot
+        top = min(s.control.v_max, r.v_wheel_max)
+        stop_time = drivers.WATCHDOG + r.drive_latency
+        hx: list[float] = []
+        hy: list[float] = []
+        hr: list[float] = []
+        hh: list[float] = []
+        hm: list[float] = []
+        reach = s.sensing_range + top * s.timeouts.staleness
+        for rid, rec in neighbours.items():
+            m = rec.msg
+            if rid == s.robot_id or math.hypot(m.x - self.odometry.pose[0],
+                                               m.y - self.odometry.pose[1]) > reach:
+                continue
+            age = now_w - m.stamp
+            full, half = neighbour_hazard(m.v, age, s.control.a, r.a_max, top,
+                                             s.timeouts.staleness, s.control.share_age,
+                                             stop_time)
+            hx.append(m.x)
+            hy.append(m.y)
+            hr.append(full)
+            hh.append(half)
+            hm.append(1.0 if age <= s.timeouts.staleness else 0.0)
+        for k in range(len(obs_r) - n_stale):
+            hx.append(obs_x[k])
+            hy.append(obs_y[k])
+            hr.append(obs_r[k] + s.control.a)
+            hh.append(-math.inf)
+            hm.append(0.0)
+        return hx, hy, hr, hh, hm
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],
@@ -281,6 +340,8 @@ class Agent:
             f |= StateFlags.HOLD
         if self.failsafe:
             f |= StateFlags.FAILSAFE
+        if self.governed:
+            f |= StateFlags.GOVERNED
         return f
 
     def _publish(self, pose: tuple[float, float, float], now_w: float) -> None:

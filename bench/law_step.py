@@ -9,11 +9,12 @@ robot computer or a SITL host running many processes).
 from __future__ import annotations
 
 import argparse
+import math
 import time
 
 import numpy as np
 
-from agent.config import ControlParams
+from agent.config import ControlParams, RobotParams
 from agent.law import LawMemory, LawParams, law_step
 
 POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0)
@@ -21,10 +22,17 @@ NBR_X, NBR_Y = [2.0, 3.0, -1.0], [1.0, -2.0, 4.0]
 OBS_X, OBS_Y, OBS_R = [6.0], [0.0], [1.0]
 
 
+HAZ_X, HAZ_Y = NBR_X + OBS_X, NBR_Y + OBS_Y
+HAZ_R = [-math.inf] * len(NBR_X) + [r + 1.0 for r in OBS_R]
+HAZ_S = [1.0] * len(NBR_X) + [-math.inf] * len(OBS_R)
+HAZ_M = [1.0] * len(NBR_X) + [0.0] * len(OBS_R)
+
+
 def law(p: ControlParams):
-    lp = LawParams.of(p)
+    lp = LawParams.of(p, RobotParams())
     return LawMemory(), lambda mem: law_step(*POSE, *REF, NBR_X, NBR_Y, OBS_X, OBS_Y, OBS_R,
-                                             mem, lp, p.period)[3]
+                                             HAZ_X, HAZ_Y, HAZ_R, HAZ_S, HAZ_M, mem, lp,
+                                             p.period)[4]
 
 
 def median_us(setup, p: ControlParams, steps: int, sweep: np.ndarray | None) -> float:

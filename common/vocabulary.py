@@ -28,6 +28,7 @@ class StateFlags(enum.IntFlag):
     ARMED = 1
     HOLD = 2          # commanded to stand still
     FAILSAFE = 4      # a timeout or fault put the agent in its safe state
+    GOVERNED = 8      # the safety governor lowered the speed this period
 
 
 @dataclass(frozen=True)

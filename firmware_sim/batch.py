@@ -70,6 +70,7 @@ class SimResult:
     v: np.ndarray            # (R, N) m/s, commanded
     u: np.ndarray            # (R, N) rad/s, commanded
     mode: np.ndarray         # (R, N) int8, agent.law.Mode
+    governed: np.ndarray     # (R, N) m/s, the speed the governor allowed (inf: it did not act)
     ref: np.ndarray          # (R, N, 2) m
     metrics: RunMetrics
     law_seconds: float = 0.0  # wall time spent in the law (for benchmarks)
@@ -130,7 +131,8 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         compiled.use_threads(n >= PARALLEL_MIN)
     T = control.period
     steps = int(round(options.duration / T))
-    params = LawParams.of(control)
+    # the ideal plant's robot follows any command at once; the wheels' limits are the law's
+    params = LawParams.of(control, None if ideal else robot)
     offsets = np.ascontiguousarray(formation.offsets, dtype=float).reshape(n, 2)
     motion = np.array([*formation.center0, *formation.velocity, formation.omega], dtype=float)
     obs = np.column_stack([obstacles.centers.reshape(-1, 2), obstacles.radii]).astype(float)
@@ -141,6 +143,7 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     rec_pose = np.zeros((n_rec, n, 3))
     rec_v, rec_u = np.zeros((n_rec, n)), np.zeros((n_rec, n))
     rec_mode = np.zeros((n_rec, n), np.int8)
+    rec_gov = np.zeros((n_rec, n))
     rec_ref = np.zeros((n_rec, n, 2))
     S = options.substeps
     dt = T / S
@@ -148,9 +151,9 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     law_seconds = 0.0
     reach = max(control.v_max, robot.v_wheel_max) * T   # m, farthest move per period
 
-    mem_f, mem_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
-    new_f, new_i = np.zeros((n, 5)), np.zeros((n, 3), np.int64)
-    cmd, ref, near = np.zeros((n, 3)), np.zeros((n, 4)), np.zeros((n, 2))
+    mem_f, mem_i = np.zeros((n, 7)), np.zeros((n, 3), np.int64)
+    new_f, new_i = np.zeros((n, 7)), np.zeros((n, 3), np.int64)
+    cmd, ref, near = np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 2))
     last_mode, err, within = np.zeros(n), np.zeros(n), np.zeros(n, bool)
     # wheels plant: drive latency in whole substeps; the commands of the last substeps, at
     # rest before the first period
@@ -162,16 +165,16 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
     watch_j, watch_k = np.empty((n, watch_cap), np.int64), np.empty((n, watch_cap), np.int64)
     hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
-    w = _WorldState(world, n, ids, pose, T, control.a, k)
+    w = _WorldState(world, n, ids, pose, T, control, robot, ideal, k)
     for step in range(steps + 1):
         t = step * T
         t0 = clock() if clock else 0.0
-        own, seen, world_i = w.before_control(step, t, pose)
+        own, seen, view, world_i = w.before_control(step, t, pose, cmd)
         if own is not pose:
             metrics.max_pose_error = max(metrics.max_pose_error, float(
                 np.hypot(own[:, 0] - pose[:, 0], own[:, 1] - pose[:, 1]).max(initial=0.0)))
         while True:
-            need, need_watch = k.control(pose, own, seen, mem_f, mem_i, offsets, motion, t,
+            need, need_watch = k.control(pose, own, seen, view, mem_f, mem_i, offsets, motion, t,
                                          obs, params, T, options.sensing_range, control.a,
                                          reach, cap, watch_cap, world_i, w.world_f, cmd, ref,
                                          new_f, new_i, near, watch_j, watch_k)
@@ -190,10 +193,11 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             pose, cmd, ref, control.K, TOLERANCE_MARGIN, step == 0, w.alive, last_mode, err,
             within)
         metrics.observe_period(t, max_v, max_u, switches, err, within, all_within)
+        metrics.observe_governor(cmd[:, 3], w.alive)
         if every and step % every == 0:
             r = step // every
             rec_t[r], rec_pose[r], rec_v[r], rec_u[r] = t, pose, v, u
-            rec_mode[r], rec_ref[r] = mode, ref[:, :2]
+            rec_mode[r], rec_ref[r], rec_gov[r] = mode, ref[:, :2], cmd[:, 3]
         last = step == steps
         first = 0 if step == 0 else 1
         # the pairs and obstacles that could be the closest or closer than a this period
@@ -231,6 +235,7 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         progress(1.0)
     metrics.killed = sorted(k_.robot for k_ in world.kill if k_.at <= options.duration)
     return SimResult(ids=ids, t=rec_t, pose=rec_pose, v=rec_v, u=rec_u, mode=rec_mode,
+                     governed=rec_gov,
                      ref=rec_ref, metrics=metrics, law_seconds=law_seconds)
 
 
@@ -239,18 +244,23 @@ class _WorldState:
     wheels, their encoder readings and who is dead (:mod:`firmware_sim.world_step`)."""
 
     def __init__(self, world: WorldParams, n: int, ids: np.ndarray, pose: np.ndarray,
-                 period: float, a: float, k: types.SimpleNamespace):
+                 period: float, control: ControlParams, robot: RobotParams, ideal: bool,
+                 k: types.SimpleNamespace):
         self.world, self.period, self.k = world, period, k
         self.truth = world.ideal
-        self.world_f = np.array([world.detection_noise, world.detection_dropout, a / 2.0])
+        self.watchdog = drivers.WATCHDOG
+        self.staleness = world.staleness(TimeoutSettings().staleness)
+        stop_time = self.watchdog + (0.0 if ideal else robot.drive_latency)
+        top_speed = control.v_max if ideal else min(control.v_max, robot.v_wheel_max)
+        self.world_f = np.array([world.detection_noise, world.detection_dropout,
+                                 control.a / 2.0, self.staleness, control.share_age,
+                                 stop_time, top_speed])
         self.alive = np.ones(n, bool)
         index = {int(r): i for i, r in enumerate(ids)}
         self.kill_at = np.full(n, np.inf)
         for kill in world.kill:
             self.kill_at[index[kill.robot]] = kill.at
         self.held = np.zeros((n, 2))           # the last command of each agent alive
-        self.watchdog = drivers.WATCHDOG
-        self.staleness = TimeoutSettings().staleness
         self.est = pose.copy()                 # odometry
         self.last_read = np.zeros((n, 2))
         if world.odometry:                     # the first reading sets the origin
@@ -259,21 +269,24 @@ class _WorldState:
         depth = int(math.ceil((world.link_delay + 4.0 * world.link_jitter) / period)) + 3
         self.hist = np.zeros((depth, n, 6))
         self.arrive = np.full((depth, n), np.inf)
+        # the robots exchanged their states at rest before the mission started
         self.view = np.zeros((n, 6))
-        self.view[:, 5] = -np.inf
+        self.view[:, :3], self.view[:, 5] = pose, 0.0
         self.bad = np.zeros(n, np.int64)
         self.slip = np.zeros((n, 2))
         self.seen = np.zeros((n, 3))
 
-    def before_control(self, step: int, t: float, pose: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(own pose, seen positions, world_i) for :func:`swarm_step.control` at t [s]."""
+    def before_control(self, step: int, t: float, pose: np.ndarray, cmd: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(own pose, seen positions, received states, world_i) for
+        :func:`swarm_step.control` at t [s]; ``cmd`` holds the last period's commands."""
         np.less(t, self.kill_at, out=self.alive)
-        if self.truth:
-            return pose, pose, np.array([1, 0, step], np.int64)
+        if self.truth:              # everyone knows everyone's current state
+            self.view[:, :3], self.view[:, 3:5], self.view[:, 5] = pose, cmd[:, :2], t
+            return pose, pose, self.view, np.array([1, 0, step], np.int64)
         self.k.deliver(t, self.hist, self.arrive, self.view, self.staleness, self.seen)
         own = self.est if self.world.odometry else pose
-        return own, self.seen, np.array([0, self.world.seed, step], np.int64)
+        return own, self.seen, self.view, np.array([0, self.world.seed, step], np.int64)
 
     def after_control(self, step: int, t: float, own: np.ndarray, cmd: np.ndarray) -> None:
         """Dead agents command nothing new (their drivers hold the last command until

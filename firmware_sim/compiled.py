@@ -28,7 +28,7 @@ from typing import Any
 log = logging.getLogger(__name__)
 
 SOURCES = ("common.draws", "agent.kinematics", "agent.avoidance", "agent.law", "agent.formation",
-           "agent.neighbours", "agent.odometry", "firmware_sim.world_step",
+           "agent.governor", "agent.neighbours", "agent.odometry", "firmware_sim.world_step",
            "firmware_sim.swarm_step")
 
 

@@ -50,6 +50,9 @@ class RunMetrics:
     _final_err: np.ndarray | None = None
     _final_within: np.ndarray | None = None
     _errors: list = field(default_factory=list)      # (t, tracking errors) once a second
+    _governed: np.ndarray | None = None              # per robot: periods the governor acted
+    _periods: np.ndarray | None = None               # per robot: periods it ran (alive)
+    governor_min_allowed: float = math.inf           # m/s
 
     def observe_geometry(self, t: float, pos: np.ndarray, pairs: np.ndarray,
                          robots: np.ndarray, clearance: np.ndarray,
@@ -114,6 +117,29 @@ class RunMetrics:
             while self._errors[0][0] < t - DEADLOCK_WINDOW - 1.0:
                 self._errors.pop(0)
 
+    def observe_governor(self, limit: np.ndarray, alive: np.ndarray) -> None:
+        """A period's governor limits [m/s] per robot (inf where it left the command alone)
+        and which robots ran the law."""
+        if self._governed is None:
+            self._governed = np.zeros(len(self.ids), np.int64)
+            self._periods = np.zeros(len(self.ids), np.int64)
+        acted = np.isfinite(limit) & alive
+        self._governed += acted
+        self._periods += alive
+        if acted.any():
+            self.governor_min_allowed = min(self.governor_min_allowed,
+                                            float(limit[acted].min()))
+
+    def _governor_summary(self) -> dict:
+        gov, per = self._governed, self._periods
+        if gov is None or per is None:
+            return {"governor_share": 0.0, "governor_share_by_robot": {},
+                    "governor_min_allowed": None}
+        return {"governor_share": _share(gov.sum(), per.sum()),
+                "governor_share_by_robot": {int(r): _share(g, p)
+                                            for r, g, p in zip(self.ids, gov, per)},
+                "governor_min_allowed": _finite_or_none(self.governor_min_allowed)}
+
     @property
     def deadlocked(self) -> list[int]:
         """The robots (ids) outside their tolerance at the end that shed less than
@@ -169,7 +195,12 @@ class RunMetrics:
             "killed_robots": list(self.killed),
             "mode_switches": self.mode_switches,
             "max_pose_error": self.max_pose_error,
+            **self._governor_summary(),
         }
+
+
+def _share(count: np.ndarray | int, periods: np.ndarray | int) -> float:
+    return float(count / periods) if periods else 0.0
 
 
 def _finite_or_none(x: float) -> float | None:

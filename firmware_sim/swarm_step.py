@@ -17,9 +17,10 @@ import math
 import numpy as np
 
 from agent.formation import reference_point
+from agent.governor import neighbour_hazard
 from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step
-from firmware_sim.world_step import FRESH, STALE, detect
+from firmware_sim.world_step import FRESH, NONE, STALE, detect
 
 prange = range   # numba.prange when compiled
 
@@ -151,7 +152,7 @@ def _watch(i: int, x: float, y: float, m: int, k: int, nbr_d: np.ndarray,
 
 
 def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np.ndarray,
-                   mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray,
+                   view: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray,
                    motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams,
                    period: float, sensing_range: float, a: float, reach: float, cap: int,
                    watch_cap: int, world_i: np.ndarray, world_f: np.ndarray,
@@ -162,12 +163,15 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     out_cmd, out_ref, out_mem_f, out_mem_i, out_near, watch_j, watch_k = outs
     truth, seed, step = world_i[0] != 0, world_i[1], world_i[2]
     det_noise, det_dropout, stale_radius = world_f[0], world_f[1], world_f[2]
+    staleness, share_age, stop_time, top_speed = world_f[3], world_f[4], world_f[5], world_f[6]
     need, need_watch = 0, 0
     max_r = obs[:, 2].max() if len(obs) else 0.0
     nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
     nbr_j = np.empty(cap, np.int64)
     o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
     o_k = np.empty(cap, np.int64)
+    h_x, h_y, h_r = np.empty(2 * cap), np.empty(2 * cap), np.empty(2 * cap)
+    h_h, h_m = np.empty(2 * cap), np.empty(2 * cap)
     for i in range(lo, hi):
         x, y = own[i, 0], own[i, 1]
         m = sense_neighbours(i, x, y, sorted_seen, sensing_range, seen_grid, cap, nbr_x,
@@ -177,8 +181,25 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         need = max(need, m, k)
         if m > cap or k > cap:
             continue
+        # the governor's hazards: neighbours at their reported positions, grown by their
+        # data's age, and the detected obstacles
+        n_h = 0
+        for q in range(m):
+            j = nbr_j[q]
+            if not truth and seen[j, 2] == NONE:
+                continue
+            age = t - view[j, 5]
+            h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3], age, a, p.accel, top_speed,
+                                                  staleness, share_age, stop_time)
+            h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness
+            n_h += 1
         if not truth:
             k = detect(i, step, seed, det_noise, det_dropout, k, o_x, o_y, o_r, o_k)
+        for q in range(k):
+            h_x[n_h], h_y[n_h], h_r[n_h], h_m[n_h] = o_x[q], o_y[q], o_r[q] + a, 0.0
+            h_h[n_h] = -math.inf
+            n_h += 1
+        if not truth:
             # stale neighbours become static obstacles; unheard ones are unknown
             fresh = 0
             for q in range(m):
@@ -197,14 +218,17 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         rx, ry, rvx, rvy = reference_point(offsets[i, 0], offsets[i, 1], motion[0],
                                            motion[1], motion[2], motion[3], motion[4], t)
         mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
-                        mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4])
-        v, u, mode, new = law_step(x, y, own[i, 2], rx, ry, nbr_x[:m], nbr_y[:m],
-                                   o_x[:k], o_y[:k], o_r[:k], mem, p, period)
-        out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2] = v, u, mode
+                        mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4], mem_f[i, 5],
+                        mem_f[i, 6])
+        v, u, mode, allowed, new = law_step(x, y, own[i, 2], rx, ry, nbr_x[:m], nbr_y[:m],
+                                            o_x[:k], o_y[:k], o_r[:k], h_x[:n_h], h_y[:n_h],
+                                            h_r[:n_h], h_h[:n_h], h_m[:n_h], mem, p, period)
+        out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2], out_cmd[i, 3] = v, u, mode, allowed
         out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
         out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey
         out_mem_f[i, 2], out_mem_f[i, 3], out_mem_f[i, 4] = (new.center_x, new.center_y,
                                                              new.radius)
+        out_mem_f[i, 5], out_mem_f[i, 6] = new.wheel_r, new.wheel_l
         out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
                                                              int(new.avoiding), new.side)
         # what to watch during the period: around the truth
@@ -230,9 +254,9 @@ def _sorted(pos: np.ndarray, grid: Grid) -> np.ndarray:
     return out
 
 
-def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, mem_f: np.ndarray,
-            mem_i: np.ndarray, offsets: np.ndarray, motion: np.ndarray, t: float,
-            obs: np.ndarray, p: LawParams, period: float, sensing_range: float, a: float,
+def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarray,
+            mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray, motion: np.ndarray,
+            t: float, obs: np.ndarray, p: LawParams, period: float, sensing_range: float, a: float,
             reach: float, cap: int, watch_cap: int, world_i: np.ndarray,
             world_f: np.ndarray, out_cmd: np.ndarray, out_ref: np.ndarray,
             out_mem_f: np.ndarray, out_mem_i: np.ndarray, out_near: np.ndarray,
@@ -241,16 +265,20 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, mem_f: np.ndarr
 
     pose (N, 3) [m, m, rad] the truth; own (N, 3) the pose each robot believes it has;
     seen (N, 3) where the robots believe the others are: x, y [m] and NONE, FRESH or STALE
-    (:mod:`firmware_sim.world_step`); world_i = (1 when own and seen are the truth and
-    detections exact, seed, period number), world_f = (detection noise [m], detection
-    dropout, radius [m] of a stale neighbour as an obstacle). Memory of
-    :class:`LawMemory` as floats (N, 5): prev_ex, prev_ey, center_x, center_y, radius, and
+    (:mod:`firmware_sim.world_step`); view (N, 6) the states they last received from each
+    other (x, y, theta, v, u, stamp [s]), for the governor's hazards; world_i = (1 when own
+    and seen are the truth and detections exact, seed, period number), world_f =
+    (detection noise [m], detection dropout, radius [m] of a stale neighbour as an
+    obstacle, staleness [s], sharing age [s], stop time of a dead agent [s], top speed
+    [m/s]) (:func:`agent.governor.neighbour_hazard`). Memory of :class:`LawMemory` as
+    floats (N, 7): prev_ex, prev_ey, center_x, center_y, radius, wheel_r, wheel_l, and
     ints (N, 3): has_prev, avoiding, side; offsets (N, 2) [m] and motion (5,) = centre0 x,
     y [m], velocity x, y [m/s], omega [rad/s] of the formation; obs (K, 3) = obstacle
     centre x, y and radius [m].
-    Out: out_cmd (N, 3) = v [m/s], u [rad/s], mode; out_ref (N, 4) = p_d, p_d_dot; the new
-    memory; out_near (N, 2) [m]: the true distance to the nearest neighbour and the
-    smallest clearance to an obstacle in range (inf: none); the watch lists, on the truth:
+    Out: out_cmd (N, 4) = v [m/s], u [rad/s], mode, the speed the governor allowed when it
+    acted [m/s] (inf: it did not); out_ref (N, 4) = p_d, p_d_dot; the new memory;
+    out_near (N, 2) [m]: the true distance to the nearest neighbour and the smallest
+    clearance to an obstacle in range (inf: none); the watch lists, on the truth:
     watch_j (N, watch_cap) the robots j > i whose distance is within
     max(nearest of i, a) + 4 reach (``reach`` [m]: the farthest a robot moves in a period),
     watch_k (N, watch_cap) the obstacles whose clearance is within the robot's smallest + 2
@@ -275,7 +303,7 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, mem_f: np.ndarr
         # the robots of a chunk in a plain function: numba optimises it better than the
         # body of a parallel loop
         need[chunk, 0], need[chunk, 1] = _control_range(
-            chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, mem_f, mem_i,
+            chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, view, mem_f, mem_i,
             offsets, motion, t, obs, p, period, sensing_range, a, reach, cap, watch_cap,
             world_i, world_f, sorted_seen, seen_grid, sorted_xy, grid, obs_grid, outs)
     return (need[:, 0].max(), need[:, 1].max()) if chunks else (0, 0)

@@ -84,6 +84,7 @@ class WorldParams(LinkParams):
 
     @property
     def detections(self) -> bool:
+        """Obstacle detections are noisy or missing."""
         return self.detection_noise > 0 or self.detection_dropout > 0
 
     @property

@@ -106,7 +106,7 @@ def replay(args: argparse.Namespace, console: Console) -> int:
                         + toml_text.dumps(scenario_doc(run_.description)))
     code = sim_cli.run(argparse.Namespace(
         scenario=str(scenario), out=str(out), duration=None, plant=None, robot=None,
-        substeps=None, record_every=1, strict=False), console)
+        substeps=None, record_every=1), console)
     folder = Path(args.spec) if Path(args.spec).is_dir() else None
     row = campaign.read_rows(folder).get(run_.key) if folder else None
     if row and row.get("status") == "ok":

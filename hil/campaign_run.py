@@ -77,7 +77,7 @@ def is_safe(metrics: Mapping[str, Any], a: float) -> bool:
 
 def run_one(desc: Mapping[str, Any]) -> dict[str, Any]:
     """Simulate the run and return its row: key, status, error, the description's columns,
-    the kill, a (collision distance), safe, deadlock, the braking margin (wheels plant) and
+    the kill, a (collision distance), safe, deadlock and
     every key of the metrics summary."""
     row: dict[str, Any] = {"key": run_key(desc), "status": "ok", "error": None,
                            **description_columns(desc)}
@@ -90,7 +90,6 @@ def run_one(desc: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _simulate(desc: Mapping[str, Any], key: str) -> dict[str, Any]:
-    from agent.config import braking_margin
     from firmware_sim.batch import SimOptions, simulate
     from firmware_sim.plant import PlantKind
     from hil.scenario import parse_scenario
@@ -104,13 +103,11 @@ def _simulate(desc: Mapping[str, Any], key: str) -> dict[str, Any]:
                       options, world=sc.world)
     metrics = result.metrics.summary(sc.name, options.duration)
     kill = (doc.get("world") or {}).get("kill") or [{}]
-    wheels = plant is PlantKind.WHEELS
     out: dict[str, Any] = {
         "kill_robot": kill[0].get("robot"), "kill_time": kill[0].get("at"),
         "a": sc.control.a, "safe": is_safe(metrics, sc.control.a),
         "deadlock": bool(metrics["deadlocked"]) if "deadlocked" in metrics
-        else not metrics["converged"],
-        "braking_margin_ok": braking_margin(sc.control, sc.robot).ok if wheels else None}
+        else not metrics["converged"]}
     out.update(metrics)
     return out
 

@@ -20,6 +20,8 @@ from agent.config import RobotParams
 from common.schema import TableReader, from_table, load_toml
 
 TOP_KEYS = {"name", "description", "robot"}
+BUNDLED = Path(__file__).resolve().parents[1] / "robots"     # the repository's profiles
+SITL_DEFAULT = BUNDLED / "cart.toml"     # the robot a SITL runs unless told otherwise
 
 
 def load_robot_profile(path: str | Path) -> RobotParams:

@@ -48,6 +48,7 @@ class Scenario:
     plant: PlantKind
     world: WorldParams = WorldParams()
     source: Path | None = None
+    robot_given: bool = False   # the file has a [robot] table (else RobotParams' defaults)
 
 
 TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles",
@@ -124,7 +125,7 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
                     formation=formation, ids=np.array(ids, dtype=int),
                     poses=np.array(poses, dtype=float), obstacles=obstacles,
                     sensing_range=sensing, substeps=substeps, plant=plant, world=world,
-                    source=source)
+                    source=source, robot_given="robot" in doc)
 
 
 def _formation(rd: TableReader, table: dict, n: int, control: ControlParams) -> Formation:

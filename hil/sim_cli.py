@@ -28,14 +28,12 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--substeps", type=int, help="physics steps per control period")
     p.add_argument("--record-every", type=int, default=1, metavar="K",
                    help="record one control period in K (0: metrics only, no figures)")
-    p.add_argument("--strict", action="store_true",
-                   help="refuse a configuration that breaks the braking margin")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Simulate, write the run folder (metrics, data, figures), print the summary."""
-    from agent.config import check_braking_margin
+    from agent.config import speed_envelope
     from firmware_sim.batch import SimOptions, simulate
     from hil import run_folder
     from hil.figures import draw_figures
@@ -56,7 +54,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
                          substeps=args.substeps or sc.substeps, plant=plant,
                          record_every=args.record_every)
     if options.plant is PlantKind.WHEELS:
-        check_braking_margin(sc.control, sc.robot, strict=args.strict)
+        console.print(speed_envelope(sc.control, sc.robot, sc.sensing_range,
+                                     sc.world.link_delay + sc.control.period).describe())
     started = time.perf_counter()
     with LazyProgress(console, f"sim {sc.name}") as progress:
         result = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,

@@ -21,6 +21,7 @@ PID, a planned death that is recorded in ``SitlRun.killed``, not reported as a l
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -38,7 +39,7 @@ from rich.live import Live
 from rich.table import Table
 
 from agent.impairment import ImpairmentSettings
-from agent.settings import AgentSettings, SensingSettings
+from agent.settings import AgentSettings, SensingSettings, TimeoutSettings
 from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
 from common.vocabulary import StateFlags
@@ -124,8 +125,11 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
     impairment = (ImpairmentSettings(seed=w.seed, link_delay=w.link_delay,
                                      link_jitter=w.link_jitter, link_loss=w.link_loss,
                                      loss_burst=w.loss_burst) if w.link else None)
+    # agents on a slow link are configured not to take live neighbours for silent ones
+    timeouts = TimeoutSettings()
+    timeouts = dataclasses.replace(timeouts, staleness=w.staleness(timeouts.staleness))
     return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=(x, y, theta),
-                         control=sc.control, robot=sc.robot, can=can,
+                         control=sc.control, robot=sc.robot, can=can, timeouts=timeouts,
                          zenoh=ZenohSettings(mode="client", connect=(endpoint,),
                                              near_radius=opts.near_radius),
                          autostart=True, sensing=SensingSettings(sc.sensing_range),

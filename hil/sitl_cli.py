@@ -29,7 +29,9 @@ def add_parser(sub: Subparsers) -> None:
                    help="udp_multicast: robot ID's bus on port BASE + ID")
     p.add_argument("--robot", metavar="FILE",
                    help="robot profile (robots/*.toml) instead of the scenario's [robot]: the "
-                        "emulated drivers' limits and the agents' robot settings")
+                        "emulated drivers' limits and the agents' robot settings (default: "
+                        "the scenario's [robot] if it has one, else robots/cart.toml, a real "
+                        "robot: 3 m/s, 2 m/s^2)")
     p.add_argument("--robots-per-plant", type=int, default=0,
                    help="robots hosted by one plant process (0: all in one)")
     p.add_argument("--no-live", action="store_true", help="no live status table")
@@ -73,15 +75,19 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from agent.settings import near_radius_problem
     from hil import run_folder
     from hil.figures import draw_figures
-    from hil.robot_profile import load_robot_profile
+    from hil.robot_profile import SITL_DEFAULT, load_robot_profile
     from hil.scenario import load_scenario
     from hil.sitl import SitlError, SitlOptions, run_sitl
     from hil.sitl_report import analyse_recording
     sc = load_scenario(args.scenario)
     if args.duration:
         sc = dataclasses.replace(sc, duration=args.duration)
-    if args.robot:
-        sc = dataclasses.replace(sc, robot=load_robot_profile(args.robot))
+    profile = args.robot
+    if profile is None and not sc.robot_given and SITL_DEFAULT.is_file():
+        profile = str(SITL_DEFAULT)
+    if profile:
+        sc = dataclasses.replace(sc, robot=load_robot_profile(profile))
+        console.print(f"robot: {profile}")
     out = Path(args.out)
     opts = SitlOptions(can_interface=args.can_interface, can_channel=args.can_channel,
                        can_base_port=args.can_base_port,
@@ -89,7 +95,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
                        gcs_port=args.gcs_port, near_radius=args.near_radius,
                        mavlink_key=_mavlink_key(args.mavlink_key),
                        realtime_priority=args.realtime_priority,
-                       robot_profile=str(Path(args.robot).resolve()) if args.robot else None)
+                       robot_profile=str(Path(profile).resolve()) if profile else None)
     if problem := near_radius_problem(opts.near_radius, sc.sensing_range):
         raise BadInput(f"--near-radius {problem}")
     started = time.perf_counter()

@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from agent.config import ControlParams
+from agent.config import ControlParams, RobotParams
 from agent.law import LawMemory, LawParams, law_step
 from firmware_sim import compiled
 
@@ -23,6 +23,7 @@ class Case(NamedTuple):
     ref: tuple[float, float]
     nbrs: list[tuple[float, float]]
     obstacles: list[tuple[float, float, float]]
+    hazards: list[tuple[float, float, float, float, float]] = []  # x, y, full, half, moving
 
 
 class Output(NamedTuple):
@@ -30,6 +31,7 @@ class Output(NamedTuple):
     u: list[float]          # rad/s
     mode: list[int]
     memory: LawMemory
+    governed: float = float("inf")   # m/s the governor allowed when it acted
 
 
 def single(pose, ref, nbrs=(), obstacles=()) -> Case:
@@ -40,16 +42,19 @@ def single(pose, ref, nbrs=(), obstacles=()) -> Case:
                 [(float(c[0]), float(c[1]), float(r)) for c, r in obstacles])
 
 
-def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None = None
-         ) -> Output:
+def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None = None,
+         robot: RobotParams | None = None) -> Output:
+    """One law step; ``robot`` None: the ideal robot (no wheel limits, infinite braking)."""
     params = params or ControlParams()
     columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs],
                [o[0] for o in case.obstacles], [o[1] for o in case.obstacles],
-               [o[2] for o in case.obstacles])
+               [o[2] for o in case.obstacles], [h[0] for h in case.hazards],
+               [h[1] for h in case.hazards], [h[2] for h in case.hazards],
+               [h[3] for h in case.hazards], [h[4] for h in case.hazards])
     law = law_step
     if IMPL == "compiled":            # arrays, as the batch simulator passes them
         law = compiled.kernels().law_step
         columns = tuple(np.array(c, dtype=float) for c in columns)
-    v, u, mode, memory = law(*case.pose, *case.ref, *columns, mem or LawMemory(),
-                             LawParams.of(params), params.period)
-    return Output([v], [u], [mode], memory)
+    v, u, mode, governed, memory = law(*case.pose, *case.ref, *columns, mem or LawMemory(),
+                                       LawParams.of(params, robot), params.period)
+    return Output([v], [u], [mode], memory, governed)

@@ -215,3 +215,29 @@ def test_runtime_parameters_change_through_set_param_only_when_valid():
         assert agent.s is settled
     # the sensing range was fixed at start (2 c), a new c does not move it
     assert agent.set_param("BS_C", 4.5) is None and agent.s.sensing_range == 8.0
+
+
+def test_a_cart_brakes_for_a_dead_robot_through_its_governor():
+    """A cart (3 m/s, 2 m/s^2) drives at a robot whose agent died where it stood (its state
+    goes stale): the governor brakes it, and it never comes within a of the dead robot."""
+    import dataclasses
+
+    from agent.config import RobotParams
+    clock, net, (agent, dead) = make_swarm([(0.0, 0.0, 0.0), (9.0, 0.0, np.pi)],
+                                           [(30.0, 0.0), (9.0, 0.0)])
+    cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
+                       drive_latency=0.02)
+    agent = Agent(dataclasses.replace(agent.s, robot=cart), MirrorMotor(clock), agent.swarm,
+                  clock)
+    dead.tick()                                  # publishes once, then never again
+    agent.arm()
+    agent.set_mode(AgentMode.FORMATION)
+    closest, flagged = np.inf, False
+    for _ in range(400):
+        agent.tick()
+        flagged = flagged or bool(agent.swarm.published[-1].flags & StateFlags.GOVERNED)
+        clock.now += 0.02
+        closest = min(closest, np.hypot(*(np.subtract(agent.odometry.pose[:2], (9.0, 0.0)))))
+    assert closest > agent.s.control.a
+    assert agent.counters.governed > 0 and flagged
+    assert agent.counters.summary()["governor_min_allowed"] < cart.v_wheel_max

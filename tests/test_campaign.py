@@ -114,8 +114,8 @@ def test_robot_profiles_given_on_the_command_line_replace_the_specs(tmp_path, fa
     from hil.campaign_spec import load_spec
     root = Path(__file__).resolve().parent.parent
     spec = load_spec(write_spec(tmp_path, CROSSED),
-                     profiles=[str(root / "robots" / "ideal.toml")])
-    assert {r.description["profile"] for r in spec.runs} == {"ideal"}
+                     profiles=[str(root / "robots" / "heavy.toml")])
+    assert {r.description["profile"] for r in spec.runs} == {"heavy"}
     assert len(spec.runs) == 144 // 2
 
 
@@ -419,6 +419,6 @@ def test_the_realistic_campaign_has_over_a_thousand_runs(families):
     spec = load_spec(REALISTIC)
     assert len(spec.runs) >= 1000
     profiles = {r.description["profile"] for r in spec.runs}
-    assert profiles == {"cart", "fast"}
+    assert profiles == {"heavy", "cart", "fast", "sporty"}
     killed = sum(bool(r.description.get("kill_at")) for r in spec.runs) / len(spec.runs)
     assert 0.25 < killed < 0.42

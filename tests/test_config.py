@@ -1,5 +1,6 @@
 import argparse
 import dataclasses
+import math
 
 import pytest
 
@@ -7,9 +8,9 @@ from agent.config import (
     CONTROL_PARAMS,
     ControlParams,
     RobotParams,
-    braking_margin,
-    check_braking_margin,
+    speed_envelope,
 )
+from agent.governor import braking_speed
 from common.schema import ConfigError, add_arguments, fields, from_table, section_from_args
 
 
@@ -52,35 +53,34 @@ def test_from_table_refuses_unknown_and_non_numbers():
     assert from_table(ControlParams, {"K": 2}, "t").K == 2.0
 
 
-def test_braking_margin_matches_the_specification():
-    fast = braking_margin(ControlParams(), RobotParams())
-    assert fast.ok and fast.v_max == 12.0
-    assert fast.reaction == pytest.approx(0.24)
-    slow_ramp = braking_margin(ControlParams(), RobotParams(wheel_ramp=200.0))
-    assert not slow_ramp.ok               # docs/controller.md: 200 rev/s^2 already breaks it
-    with pytest.raises(ConfigError, match="braking margin"):
-        check_braking_margin(ControlParams(), RobotParams(wheel_ramp=200.0), strict=True)
-    # stale neighbour data eats the margin too, and so does the drive latency
-    assert not braking_margin(ControlParams(), RobotParams(), data_age=0.05).ok
-    late = braking_margin(ControlParams(), RobotParams(drive_latency=0.05))
-    assert late.reaction == pytest.approx(12.0 * (0.02 + 0.05)) and not late.ok
-
-
-def test_braking_margin_warns_when_not_strict(caplog):
-    check_braking_margin(ControlParams(), RobotParams(wheel_ramp=200.0))
-    assert "EXCEEDS" in caplog.text
+def test_the_speed_envelope_states_what_the_governor_allows():
+    cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
+                       drive_latency=0.02)
+    free = speed_envelope(ControlParams(), cart, 8.0, 0.05)
+    assert free.top == pytest.approx(3.0, abs=0.01) and free.head_on > free.top
+    assert "never limits" in free.describe()
+    slow = speed_envelope(ControlParams(), RobotParams(wheel_ramp=5.0), 8.0, 0.05)
+    # 12 m/s top, 6.3 m/s^2: each robot owns (8 - 1)/2 - 12 * 0.05 = 2.9 m
+    assert slow.head_on == pytest.approx(braking_speed(2.9, 2 * math.pi * 0.2 * 5.0, 0.02))
+    assert "limits the robot to" in slow.describe()
 
 
 def test_every_field_is_documented_with_a_unit():
     for f in fields(ControlParams) + fields(RobotParams):
-        assert f.unit and f.doc and isinstance(f.default, float), f.name
+        assert f.doc, f.name
+        if f.type is bool:                  # a switch has no unit
+            assert isinstance(f.default, bool), f.name
+        else:
+            assert f.unit and isinstance(f.default, float), f.name
 
 
 def test_control_params_as_runtime_parameters():
     names = [p.name for p in CONTROL_PARAMS]
     assert names == ["BS_K", "BS_K_THETA", "BS_D_MAX", "BS_K_IJ", "BS_A", "BS_B", "BS_C",
-                     "BS_PERIOD", "BS_U_MAX", "BS_HYST"]
-    assert [p.field for p in CONTROL_PARAMS] == [f.name for f in dataclasses.fields(ControlParams)]
+                     "BS_PERIOD", "BS_U_MAX", "BS_HYST", "BS_SHARE_AGE"]
+    # every numeric field, in order; the governor switch is no runtime parameter
+    assert [p.field for p in CONTROL_PARAMS] == [f.name for f in dataclasses.fields(ControlParams)
+                                                 if f.name != "governor"]
     assert [p.index for p in CONTROL_PARAMS] == list(range(len(names)))
     period = CONTROL_PARAMS[names.index("BS_PERIOD")]
     assert period.read_only and "read-only at runtime" in period.read_only

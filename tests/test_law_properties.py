@@ -7,12 +7,16 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.config import ControlParams
+from agent.config import ControlParams, RobotParams
+from agent.kinematics import body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step
 from firmware_sim import compiled
 
 P = ControlParams()
-LP = LawParams.of(P)
+CART = RobotParams(wheel_radius=0.08, wheel_base=0.6, wheel_speed_limit=6.0, wheel_ramp=4.0,
+                   drive_latency=0.02)
+LP = LawParams.of(P, None)              # the ideal robot
+LP_CART = LawParams.of(P, CART)         # wheels with limits: the governor and the ramp act
 coord = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
 near = st.floats(-6.0, 6.0, allow_nan=False, allow_infinity=False)
 angle = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
@@ -21,8 +25,9 @@ point = st.tuples(near, near)
 
 @st.composite
 def cases(draw):
-    """(pose, ref, nbr_x, nbr_y, obs_x, obs_y, obs_r, memory) around a random base point;
-    references and neighbours may coincide with the robot (D = 0, r = 0)."""
+    """(pose, ref, nbr_x, nbr_y, obs_x, obs_y, obs_r, hazards x, y, full, half, moving, memory)
+    around a random base point; references and neighbours may coincide with the robot
+    (D = 0, r = 0); the hazards are the neighbours and obstacles, as agents build them."""
     bx, by = draw(coord), draw(coord)
     dx, dy = draw(point)
     pose = (bx + dx, by + dy, draw(angle))
@@ -34,41 +39,68 @@ def cases(draw):
     mem = LawMemory()
     if draw(st.booleans()):
         centre = obs[0] if obs else ((0.0, 0.0), 0.0)
+        wheels = st.floats(-6.0, 6.0)
         mem = LawMemory(*draw(point), True, draw(st.booleans()),
-                        draw(st.sampled_from([-1, 0, 1])), *centre[0], centre[1])
+                        draw(st.sampled_from([-1, 0, 1])), *centre[0], centre[1],
+                        draw(wheels), draw(wheels))
+    hazards = [(q[0], q[1], -math.inf, P.a, 1.0) for q in nbrs] + \
+        [(o[0][0], o[0][1], o[1] + P.a, -math.inf, 0.0) for o in obs]
     return (pose, ref, [q[0] for q in nbrs], [q[1] for q in nbrs],
-            [o[0][0] for o in obs], [o[0][1] for o in obs], [o[1] for o in obs], mem)
+            [o[0][0] for o in obs], [o[0][1] for o in obs], [o[1] for o in obs],
+            *([h[c] for h in hazards] for c in range(5)), mem)
 
 
-def run(law, case, columns=list):
+def run(law, case, columns=list, lp=LP):
     pose, ref, *cols, mem = case
-    return law(*pose, *ref, *(columns(c) for c in cols), mem, LP, P.period)
+    return law(*pose, *ref, *(columns(c) for c in cols), mem, lp, P.period)
 
 
 @settings(max_examples=300, deadline=None)
-@given(cases())
-def test_outputs_finite_and_bounded(case):
-    v, u, mode, mem = run(law_step, case)
+@given(cases(), st.sampled_from([LP, LP_CART]))
+def test_outputs_finite_and_bounded(case, lp):
+    v, u, mode, governed, mem = run(law_step, case, lp=lp)
     assert math.isfinite(v) and math.isfinite(u)
-    assert abs(u) <= P.u_max and abs(v) <= P.K * P.D_max + 1e-9
+    # within the bounds, or no farther from them than the wheels' speeds it starts from
+    # (the ramp takes time to bring a robot spinning too fast back)
+    was = case[-1]
+    v0, u0 = body_velocity(2 * math.pi * was.wheel_r, 2 * math.pi * was.wheel_l,
+                           CART.wheel_radius, CART.wheel_base) if lp is LP_CART else (0, 0)
+    assert abs(u) <= max(P.u_max, abs(u0)) + 1e-9
+    assert abs(v) <= max(P.K * P.D_max, abs(v0)) + 1e-9
     assert mode in (0, 1, 2)
     assert math.isfinite(mem.prev_ex) and math.isfinite(mem.prev_ey)
+    assert math.isinf(governed) or governed >= 0.0
     # the memory it returns can be fed back in
-    v2, u2, _, _ = run(law_step, (*case[:-1], mem))
+    v2, u2, _, _, _ = run(law_step, (*case[:-1], mem), lp=lp)
     assert math.isfinite(v2) and math.isfinite(u2)
 
 
 @settings(max_examples=300, deadline=None)
 @given(cases())
-def test_compiled_law_equals_the_interpreted_one(case):
-    want = run(law_step, case)
-    got = run(compiled.kernels().law_step, case, lambda c: np.array(c, dtype=float))
+def test_commands_are_ones_the_wheels_can_follow(case):
+    """Within the wheel speed limit, and each wheel within one period's ramp of its last
+    set-point: nothing after the law has to clip."""
+    mem = case[-1]
+    v, u, _, _, new = run(law_step, case, lp=LP_CART)
+    right, left = wheel_command(v, u, CART.wheel_radius, CART.wheel_base,
+                                CART.wheel_speed_limit)
+    assert max(abs(right - new.wheel_r), abs(left - new.wheel_l)) < 1e-9
+    step = CART.wheel_ramp * P.period + 1e-9
+    assert abs(new.wheel_r - mem.wheel_r) <= step and abs(new.wheel_l - mem.wheel_l) <= step
+    assert max(abs(new.wheel_r), abs(new.wheel_l)) <= CART.wheel_speed_limit + 1e-9
+
+
+@settings(max_examples=300, deadline=None)
+@given(cases(), st.sampled_from([LP, LP_CART]))
+def test_compiled_law_equals_the_interpreted_one(case, lp):
+    want = run(law_step, case, lp=lp)
+    got = run(compiled.kernels().law_step, case, lambda c: np.array(c, dtype=float), lp=lp)
     assert got == want                       # bit for bit, memory included
 
 
 @settings(max_examples=100, deadline=None)
 @given(st.floats(0.0, 1e-12), angle)
 def test_reference_at_the_robot(offset, theta):
-    v, u, _, _ = law_step(1.0, 2.0, theta, 1.0 + offset, 2.0, [], [], [], [], [], LawMemory(),
-                          LP, P.period)
+    v, u, _, _, _ = law_step(1.0, 2.0, theta, 1.0 + offset, 2.0, [], [], [], [], [], [], [],
+                             [], [], [], LawMemory(), LP, P.period)
     assert math.isfinite(u) and abs(v) <= P.K * 1e-12 + 1e-15

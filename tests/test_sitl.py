@@ -76,7 +76,8 @@ def launch(tmp_path):
 
 def test_sitl_paper_scenario(launch):
     sc = load_scenario(SCENARIOS / "paper.toml")
-    run = launch("paper.toml", "--duration", "12")
+    # the paper's ideal robot, to compare with the batch simulator's ideal plant
+    run = launch("paper.toml", "--duration", "12", "--robot", str(ROOT / "robots" / "ideal.toml"))
     code, out = run.wait(timeout=150)
     assert code == 0, out
     m = json.loads((run.out / "metrics.json").read_text())

@@ -1,0 +1,136 @@
+"""The safety governor: the fastest a robot may go and still stop before any hazard.
+
+A closed-form braking-distance barrier (docs/controller.md, "Safety governor"), in the spirit
+of Responsibility-Sensitive Safety and PX4's collision prevention: every hazard is a disc the
+robot's centre must stay out of, and the robot may move toward it only as fast as lets it
+stop in the free distance it owns, after a reaction time and at its braking deceleration.
+
+* **Hazards.** An obstacle: its detected disc grown by a, taken in full. A neighbour: its
+  *reported* position, grown by a and by what it can have travelled since its stamp (its
+  speed and acceleration over the data age, at most the swarm's top speed). While its data
+  is younger than the sharing age it runs the same governor on fresh data of this robot,
+  so the free distance between them is shared half and half; older, it may also be dead,
+  and this robot keeps out of what it would then still travel (its drivers' watchdog, then
+  braking) as well. A silent neighbour (older than the staleness limit): a static disc at
+  its last known position grown by a and by what it could travel from its last report
+  until it must have stopped, taken in full.
+* **Limit.** For a hazard at distance d the robot owns f = min(d - R, (d - R_half) / 2).
+  Moving along its heading (or against it, when reversing) at speed v, with c the cosine
+  of the angle between the hazard's bearing and the headings the robot can have while it
+  stops (:func:`speed_limits`), it must satisfy c (v tau + v^2 / (2 a)) <= f, tau its
+  reaction time (the drivers' watchdog, should its own agent die, and the drive latency).
+  Hazards away from the direction of travel (c <= 0) do not limit it, so a robot can
+  always back away.
+
+Plain floats: agents run it interpreted, the batch simulator compiled, as the law.
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from agent.kinematics import wrap_angle
+
+if TYPE_CHECKING:
+    from agent.avoidance import FloatSeq
+
+EPS = 1e-9
+MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nearer the travel
+
+
+def neighbour_hazard(speed: float, age: float, a: float, accel: float, top_speed: float,
+                     staleness: float, share_age: float, stop_time: float
+                     ) -> tuple[float, float]:
+    """(full, half): the exclusion radii [m] around a neighbour's reported position, last
+    reported moving at ``speed`` [m/s] ``age`` [s] ago. This robot owns
+    min(d - full, (d - half) / 2) of a distance d to it (-inf: that rule does not apply).
+    ``accel`` [m/s^2] and ``top_speed`` [m/s] bound how its speed can have changed since;
+    ``stop_time`` [s] is how long a dead agent's drivers keep going before they brake
+    (watchdog and drive latency).
+
+    Alive (age <= share_age): it runs the same governor on fresh data and keeps to its half
+    of the gap beyond a and its travel since the stamp. Perhaps dead (older): also at most
+    the whole gap less its stopping distance at the fastest it can now be going. Silent
+    (age > staleness): a static disc grown by what it could travel from its last report
+    until it must have stopped, taken in full."""
+    speed = abs(speed)
+    age = max(age, 0.0)
+    if age > staleness:
+        return a + stopping(speed, accel, stop_time), -math.inf
+    grow = top_speed * age
+    now = top_speed
+    if not math.isinf(accel):
+        grow = min(grow, speed * age + 0.5 * accel * age * age)
+        now = min(now, speed + accel * age)
+    if age <= share_age:
+        return -math.inf, a + grow
+    return a + grow + stopping(now, accel, stop_time), a + grow
+
+
+def stopping(speed: float, accel: float, delay: float) -> float:
+    """Distance [m] covered from ``speed`` [m/s] in ``delay`` [s], then braking at
+    ``accel`` [m/s^2]."""
+    brake = 0.0 if math.isinf(accel) else speed * speed / (2.0 * accel)
+    return speed * delay + brake
+
+
+def braking_speed(free: float, accel: float, reaction: float) -> float:
+    """The largest v [m/s] with v reaction + v^2 / (2 accel) <= free [m] (0 when free <= 0)."""
+    if free <= 0.0:
+        return 0.0
+    if math.isinf(accel):
+        return free / reaction if reaction > 0.0 else math.inf
+    return accel * (math.sqrt(reaction * reaction + 2.0 * free / accel) - reaction)
+
+
+def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
+                 haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq, haz_half: FloatSeq,
+                 haz_moving: FloatSeq, accel: float, period: float, latency: float,
+                 turn_rate: float, top_speed: float = math.inf) -> tuple[float, float]:
+    """(forward, backward) speed limits [m/s] (inf: none) of a robot at (x, y, theta)
+    [m, m, rad] moving at (v_now [m/s], u_now [rad/s]) among hazards (centre; exclusion
+    radii [m]: of the whole free distance, and of the half this robot owns (-inf: no such
+    rule, :func:`neighbour_hazard`); 1 for a neighbour that moves and 0 for a static disc),
+    braking at ``accel`` [m/s^2]. ``period`` [s] is how long a command holds (or the
+    drivers' watchdog, when the robot's agent may die). A command holds for ``period`` [s] and
+    reaches the wheels ``latency`` [s] (at most a period) late: until then the robot goes
+    on at v_now (its last command), give or take one period's ramp; a robot already faster
+    than it may go brakes at the full ramp.
+
+    While it stops, the robot's heading sweeps on at u_now (braking takes the whole ramp of
+    both wheels, so the turn rate holds) and may turn up to ``turn_rate`` [rad/s] more
+    during the reaction time. A hazard counts with the cosine of its bearing's angle to the
+    nearest heading of that sweep (1 inside it; none beyond 90 degrees); a moving one as if
+    its bearing were MOVING_PAD nearer, as its own motion turns the line of sight. Hazards
+    farther than the robot needs to stop from ``top_speed`` [m/s] are skipped."""
+    fwd = bwd = math.inf
+    reaction = period + latency
+    ramp = 0.0 if math.isinf(accel) else accel * period   # m/s the speed may differ by in flight
+    stop_time = reaction + (0.0 if math.isinf(accel) else abs(v_now) / accel)
+    sweep = u_now * stop_time
+    spread = 0.5 * abs(sweep) + turn_rate * reaction
+    middle = theta + 0.5 * sweep
+    reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period)
+    for h in range(len(haz_r)):
+        dx, dy = haz_x[h] - x, haz_y[h] - y
+        d = math.sqrt(dx * dx + dy * dy)
+        free = min(d - haz_r[h], 0.5 * (d - haz_half[h]))
+        if free >= reach:            # cannot hold the robot below its top speed
+            continue
+        bearing = math.atan2(dy, dx)
+        for backward in range(2):
+            heading = middle + math.pi if backward else middle
+            off = abs(wrap_angle(bearing - heading)) - spread
+            if haz_moving[h] != 0.0:
+                off -= MOVING_PAD
+            c = 1.0 if d < EPS or off <= 0.0 else math.cos(off)
+            if c > EPS:
+                going = max(-v_now if backward else v_now, 0.0)      # m/s this way now
+                limit = braking_speed(free / c - (going + ramp) * latency, accel, period)
+                if going > limit:        # behind the braking curve: brake at the full ramp
+                    limit = 0.0
+                if backward:
+                    bwd = min(bwd, limit)
+                else:
+                    fwd = min(fwd, limit)
+    return fwd, bwd

@@ -1,0 +1,126 @@
+"""The safety governor (agent.governor): hazards, braking speeds, limits, and the promise that
+a robot braking from the speed it allows stops outside every hazard."""
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent.governor import braking_speed, neighbour_hazard, speed_limits, stopping
+from firmware_sim.batch import SimOptions, simulate
+from firmware_sim.plant import PlantKind
+from firmware_sim.world import WorldParams
+from hil.robot_profile import load_robot_profile
+from hil.scenario import load_scenario
+
+A, ACCEL, TOP, STALE, SHARE, STOP = 1.0, 2.0, 3.0, 0.5, 0.1, 0.12
+
+
+def test_braking_speed_uses_exactly_the_free_distance():
+    v = braking_speed(2.0, ACCEL, 0.04)
+    assert v * 0.04 + v * v / (2 * ACCEL) == pytest.approx(2.0)
+    assert braking_speed(0.0, ACCEL, 0.04) == 0.0 and braking_speed(-1.0, ACCEL, 0.04) == 0.0
+    assert braking_speed(0.5, math.inf, 0.02) == pytest.approx(25.0)   # an ideal robot
+
+
+def test_a_fresh_neighbour_shares_and_grows_by_its_travel_since_its_stamp():
+    full, half = neighbour_hazard(2.0, 0.05, A, ACCEL, TOP, STALE, SHARE, STOP)
+    assert full == -math.inf                                # alive: it keeps to its half
+    assert half == pytest.approx(A + 2.0 * 0.05 + 0.5 * ACCEL * 0.05 ** 2)
+
+
+def test_an_older_neighbour_may_be_dead_and_still_travel_its_stopping_distance():
+    age = 0.3
+    full, half = neighbour_hazard(2.0, age, A, ACCEL, TOP, STALE, SHARE, STOP)
+    now = min(2.0 + ACCEL * age, TOP)                       # the fastest it can be going now
+    travel = min(TOP * age, 2.0 * age + 0.5 * ACCEL * age ** 2)
+    assert half == pytest.approx(A + travel)
+    assert full == pytest.approx(A + travel + stopping(now, ACCEL, STOP))
+
+
+def test_a_silent_neighbour_is_a_static_disc_grown_until_it_must_have_stopped():
+    full, half = neighbour_hazard(2.0, 5.0, A, ACCEL, TOP, STALE, SHARE, STOP)
+    assert half == -math.inf
+    assert full == pytest.approx(A + 2.0 * STOP + 2.0 ** 2 / (2 * ACCEL))
+    assert neighbour_hazard(2.0, 50.0, A, ACCEL, TOP, STALE, SHARE, STOP)[0] == full
+
+
+def limits(hx, hy, r=2.0, half=-math.inf, moving=0.0, theta=0.0, v_now=0.0, u_now=0.0,
+           turn_rate=0.0):
+    return speed_limits(0.0, 0.0, theta, v_now, u_now, [hx], [hy], [r], [half], [moving],
+                        ACCEL, 0.04, 0.0, turn_rate)
+
+
+def test_a_hazard_ahead_limits_forward_only():
+    fwd, bwd = limits(5.0, 0.0)
+    assert fwd == pytest.approx(braking_speed(3.0, ACCEL, 0.04)) and bwd == math.inf
+    fwd, bwd = limits(-5.0, 0.0)
+    assert fwd == math.inf and bwd == pytest.approx(braking_speed(3.0, ACCEL, 0.04))
+
+
+def test_a_static_hazard_abeam_does_not_limit_but_a_moving_one_does():
+    assert limits(0.0, 5.0) == (math.inf, math.inf)
+    fwd, bwd = limits(0.0, 5.0, moving=1.0)
+    assert fwd < math.inf and bwd < math.inf
+
+
+def test_a_turning_robot_counts_what_its_heading_sweeps_while_it_stops():
+    """Abeam at first, but the robot turns toward it at 2 rad/s while it brakes from 2 m/s."""
+    assert limits(0.0, 5.0, v_now=2.0, u_now=0.0)[0] == math.inf
+    assert limits(0.0, 5.0, v_now=2.0, u_now=2.0)[0] == pytest.approx(
+        braking_speed(3.0, ACCEL, 0.04))
+
+
+def test_inside_a_hazard_the_robot_may_only_back_away():
+    fwd, bwd = limits(1.0, 0.0)
+    assert fwd == 0.0 and bwd == math.inf
+
+
+@settings(max_examples=100, deadline=None)
+@given(d0=st.floats(2.5, 30.0), accel=st.floats(0.5, 30.0), v_top=st.floats(0.5, 12.0),
+       period=st.sampled_from([0.01, 0.02, 0.05]), lag=st.floats(0.0, 1.0))
+def test_braking_from_the_allowed_speed_stops_outside_the_hazard(d0, accel, v_top, period,
+                                                                  lag):
+    """Straight at a hazard, commanding the allowed speed every period as the law does
+    (ramped from its last command, which it takes as the speed it goes on at), applied a
+    latency of up to one period late by wheels with the same ramp: the robot never enters
+    the hazard."""
+    radius, dt = 2.0, 0.001
+    steps_per_period = round(period / dt)
+    queue = [0.0] * round(lag * steps_per_period)     # commands on their way to the wheels
+    latency = len(queue) * dt
+    x, v, command = 0.0, 0.0, 0.0
+    for k in range(int(30.0 / dt)):
+        if k % steps_per_period == 0:
+            fwd, _ = speed_limits(x, 0.0, 0.0, command, 0.0, [d0], [0.0], [radius],
+                                  [-math.inf], [0.0], accel, period, latency, 0.0)
+            step = accel * period                    # the law's ramp, as the wheels'
+            command = min(max(min(v_top, fwd), command - step), command + step)
+            if command == 0.0 and v == 0.0:
+                break
+        queue.append(command)
+        goal = queue.pop(0)
+        v_new = v + min(max(goal - v, -accel * dt), accel * dt)
+        x += 0.5 * (v + v_new) * dt                  # exact for a constant ramp
+        v = v_new
+        assert x <= d0 - radius + 1e-5       # (the 1 ms steps of this plant: um)
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize("scenario", ["paper", "head_on_swap", "grid", "narrow_gap"])
+@pytest.mark.parametrize("profile", ["heavy", "cart", "sporty"])
+def test_real_robots_keep_their_distance_in_the_bundled_scenarios(scenario, profile):
+    """Closed loop, wheels plant, 0.2 s of link delay: no pair within a, no robot centre
+    within a of an obstacle surface (the law alone breaks this in most of these runs)."""
+    sc = load_scenario(ROOT / "scenarios" / f"{scenario}.toml")
+    robot = load_robot_profile(ROOT / "robots" / f"{profile}.toml")
+    m = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, robot,
+                 SimOptions(duration=20.0, plant=PlantKind.WHEELS, record_every=0),
+                 world=WorldParams(link_delay=0.2, link_jitter=0.02)
+                 ).metrics.summary(scenario, 20.0)
+    assert m["collisions"] == 0
+    assert m["min_pair_distance"] > sc.control.a
+    assert m["min_obstacle_clearance"] is None or m["min_obstacle_clearance"] > sc.control.a
