@@ -57,7 +57,8 @@ class PayloadKind(enum.IntEnum):
     WHEELS = 5
 
 
-_FLAGS = tuple(StateFlags(bits) for bits in range(8))     # decoded flags, built once
+_FLAG_MASK = sum(int(f) for f in StateFlags)
+_FLAGS = tuple(StateFlags(bits) for bits in range(_FLAG_MASK + 1))   # decoded flags, built once
 
 M = TypeVar("M")
 
@@ -152,7 +153,8 @@ class StateMsg:
     def decode(cls, data: bytes) -> "StateMsg":
         h, (x, y, th, v, u, xd, yd, mode, flags) = _fixed(data, PayloadKind.STATE, STATE_BODY,
                                                           "state")
-        return cls(h.robot_id, h.seq, h.stamp, x, y, th, v, u, xd, yd, mode, _FLAGS[flags & 0x7])
+        return cls(h.robot_id, h.seq, h.stamp, x, y, th, v, u, xd, yd, mode,
+                   _FLAGS[flags & _FLAG_MASK])
 
 
 @dataclass(frozen=True)

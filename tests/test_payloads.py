@@ -22,6 +22,13 @@ def test_state_golden_bytes():
     assert StateMsg.decode(data) == STATE
 
 
+@pytest.mark.parametrize("flags", [StateFlags(0), StateFlags.GOVERNED,
+                                   StateFlags.ARMED | StateFlags.FAILSAFE | StateFlags.GOVERNED])
+def test_every_state_flag_survives_the_wire(flags):
+    msg = StateMsg(**{**STATE.__dict__, "flags": flags})
+    assert StateMsg.decode(msg.encode()).flags == flags
+
+
 @pytest.mark.parametrize("mutate, reason", [
     (lambda d: d[:-1], "size"),
     (lambda d: d + b"\0", "size"),
