@@ -11,9 +11,10 @@ stop in the free distance it owns, after a reaction time and at its braking dece
   is younger than the sharing age it runs the same governor on fresh data of this robot,
   so the free distance between them is shared half and half; older, it may also be dead,
   and this robot keeps out of what it would then still travel (its drivers' watchdog, then
-  braking) as well. A silent neighbour (older than the staleness limit): a static disc at
-  its last known position grown by a and by what it could travel from its last report
-  until it must have stopped, taken in full.
+  each wheel braking to rest on its own: :func:`dead_travel`) as well. A silent neighbour
+  (older than the staleness limit): a static disc at its last known position grown by a
+  and by what it could travel from its last report until it must have stopped, taken in
+  full.
 * **Limit.** For a hazard at distance d the robot owns f = min(d - R, (d - R_half) / 2).
   Moving along its heading (or against it, when reversing) at speed v, with c the cosine
   of the angle between the hazard's bearing and the headings the robot can have while it
@@ -38,33 +39,52 @@ EPS = 1e-9
 MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nearer the travel
 
 
-def neighbour_hazard(speed: float, age: float, a: float, accel: float, top_speed: float,
-                     staleness: float, share_age: float, stop_time: float
+def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: float,
+                     top_speed: float, staleness: float, share_age: float, stop_time: float
                      ) -> tuple[float, float]:
     """(full, half): the exclusion radii [m] around a neighbour's reported position, last
-    reported moving at ``speed`` [m/s] ``age`` [s] ago. This robot owns
-    min(d - full, (d - half) / 2) of a distance d to it (-inf: that rule does not apply).
-    ``accel`` [m/s^2] and ``top_speed`` [m/s] bound how its speed can have changed since;
-    ``stop_time`` [s] is how long a dead agent's drivers keep going before they brake
-    (watchdog and drive latency).
+    reported moving at ``speed`` [m/s] and turning with its wheels ``turn`` [m/s] apart
+    (half the difference of their ground speeds: |u| times half the wheel base) ``age`` [s]
+    ago. This robot owns min(d - full, (d - half) / 2) of a distance d to it (-inf: that
+    rule does not apply). ``accel`` [m/s^2] and ``top_speed`` [m/s] bound how its speed
+    can have changed since; ``stop_time`` [s] is how long a dead agent's drivers keep going
+    before they brake (watchdog and drive latency).
 
     Alive (age <= share_age): it runs the same governor on fresh data and keeps to its half
     of the gap beyond a and its travel since the stamp. Perhaps dead (older): also at most
-    the whole gap less its stopping distance at the fastest it can now be going. Silent
-    (age > staleness): a static disc grown by what it could travel from its last report
-    until it must have stopped, taken in full."""
-    speed = abs(speed)
+    the whole gap less what it would still travel (:func:`dead_travel`) at the fastest it
+    can now be going and turning. Silent (age > staleness): a static disc grown by what it
+    could travel from its last report until it must have stopped, taken in full."""
+    speed, turn = abs(speed), abs(turn)
     age = max(age, 0.0)
     if age > staleness:
-        return a + stopping(speed, accel, stop_time), -math.inf
+        return a + dead_travel(speed, turn, accel, stop_time), -math.inf
     grow = top_speed * age
-    now = top_speed
+    now, turn_now = top_speed, turn
     if not math.isinf(accel):
         grow = min(grow, speed * age + 0.5 * accel * age * age)
         now = min(now, speed + accel * age)
+        turn_now = turn + accel * age       # each wheel's speed changes at most accel
     if age <= share_age:
         return -math.inf, a + grow
-    return a + grow + stopping(now, accel, stop_time), a + grow
+    return a + grow + dead_travel(now, turn_now, accel, stop_time), a + grow
+
+
+def dead_travel(speed: float, turn: float, accel: float, delay: float) -> float:
+    """The longest path [m] of the centre of a robot whose agent died moving at ``speed``
+    [m/s] with its wheels ``turn`` [m/s] apart (their ground speeds speed +- turn): its
+    drivers hold the command for ``delay`` [s], then ramp each wheel to rest on its own at
+    ``accel`` [m/s^2]. The centre moves at the mean of the wheels' speeds: while both turn
+    the same way the path is the mean of their braking distances, (v^2 + w^2) / (2 accel),
+    more than v^2 / (2 accel) as the slower wheel stops first; when they turn opposite ways
+    (a robot spinning) the mean holds at v until the slower one stops, then the faster one
+    alone drags the centre: v w / accel. At 2 m/s^2, a robot reported at v = 0.6 m/s
+    spinning with its wheels 1.5 m/s apart brakes over 0.45 m, not 0.09 m."""
+    speed, turn = abs(speed), abs(turn)
+    if math.isinf(accel):
+        return speed * delay
+    brake = (speed * speed + turn * turn if turn <= speed else 2.0 * speed * turn)
+    return speed * delay + brake / (2.0 * accel)
 
 
 def stopping(speed: float, accel: float, delay: float) -> float:

@@ -298,9 +298,9 @@ class Agent:
                                                m.y - self.odometry.pose[1]) > reach:
                 continue
             age = now_w - m.stamp
-            full, half = neighbour_hazard(m.v, age, s.control.a, r.a_max, top,
-                                             s.timeouts.staleness, s.control.share_age,
-                                             stop_time)
+            full, half = neighbour_hazard(m.v, 0.5 * m.u * r.wheel_base, age, s.control.a,
+                                          r.a_max, top, s.timeouts.staleness,
+                                          s.control.share_age, stop_time)
             hx.append(m.x)
             hy.append(m.y)
             hr.append(full)

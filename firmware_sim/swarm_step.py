@@ -189,8 +189,10 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             if not truth and seen[j, 2] == NONE:
                 continue
             age = t - view[j, 5]
-            h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3], age, a, p.accel, top_speed,
-                                                  staleness, share_age, stop_time)
+            h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3],
+                                                  0.5 * view[j, 4] * p.wheel_base, age, a,
+                                                  p.accel, top_speed, staleness, share_age,
+                                                  stop_time)
             h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness
             n_h += 1
         if not truth:

@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.governor import braking_speed, neighbour_hazard, speed_limits, stopping
+from agent.governor import braking_speed, dead_travel, neighbour_hazard, speed_limits, stopping
+from agent.kinematics import arc_step
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
@@ -25,25 +26,68 @@ def test_braking_speed_uses_exactly_the_free_distance():
 
 
 def test_a_fresh_neighbour_shares_and_grows_by_its_travel_since_its_stamp():
-    full, half = neighbour_hazard(2.0, 0.05, A, ACCEL, TOP, STALE, SHARE, STOP)
+    full, half = neighbour_hazard(2.0, 0.0, 0.05, A, ACCEL, TOP, STALE, SHARE, STOP)
     assert full == -math.inf                                # alive: it keeps to its half
     assert half == pytest.approx(A + 2.0 * 0.05 + 0.5 * ACCEL * 0.05 ** 2)
 
 
 def test_an_older_neighbour_may_be_dead_and_still_travel_its_stopping_distance():
     age = 0.3
-    full, half = neighbour_hazard(2.0, age, A, ACCEL, TOP, STALE, SHARE, STOP)
+    full, half = neighbour_hazard(2.0, 0.0, age, A, ACCEL, TOP, STALE, SHARE, STOP)
     now = min(2.0 + ACCEL * age, TOP)                       # the fastest it can be going now
+    turn = ACCEL * age                                      # and its wheels can be apart
     travel = min(TOP * age, 2.0 * age + 0.5 * ACCEL * age ** 2)
     assert half == pytest.approx(A + travel)
-    assert full == pytest.approx(A + travel + stopping(now, ACCEL, STOP))
+    assert full == pytest.approx(A + travel + dead_travel(now, turn, ACCEL, STOP))
+    assert full > A + travel + stopping(now, ACCEL, STOP)
 
 
 def test_a_silent_neighbour_is_a_static_disc_grown_until_it_must_have_stopped():
-    full, half = neighbour_hazard(2.0, 5.0, A, ACCEL, TOP, STALE, SHARE, STOP)
+    full, half = neighbour_hazard(2.0, 0.0, 5.0, A, ACCEL, TOP, STALE, SHARE, STOP)
     assert half == -math.inf
     assert full == pytest.approx(A + 2.0 * STOP + 2.0 ** 2 / (2 * ACCEL))
-    assert neighbour_hazard(2.0, 50.0, A, ACCEL, TOP, STALE, SHARE, STOP)[0] == full
+    assert neighbour_hazard(2.0, 0.0, 50.0, A, ACCEL, TOP, STALE, SHARE, STOP)[0] == full
+
+
+def dead_robot_path(v, u, base, accel, hold, dt=1e-4):
+    """The batch plant's dead robot (firmware_sim.swarm_step.advance): its drivers hold
+    (v, u) for ``hold`` s, then ramp each wheel to rest at ``accel``. Returns the farthest
+    its centre gets from where it started [m]."""
+    right, left = v + 0.5 * u * base, v - 0.5 * u * base      # the wheels' ground speeds
+    x, y, th, far = 0.0, 0.0, 0.0, 0.0
+    for k in range(64):                                      # held: an arc
+        x, y, th = arc_step(0.0, 0.0, 0.0, v * hold * k / 63, u * hold * k / 63)
+        far = max(far, math.hypot(x, y))
+    while right != 0.0 or left != 0.0:                      # each wheel ramps to rest
+        r0, l0 = right, left
+        right -= math.copysign(min(abs(right), accel * dt), right)
+        left -= math.copysign(min(abs(left), accel * dt), left)
+        vr, vl = 0.5 * (r0 + right), 0.5 * (l0 + left)   # exact unless a wheel stops mid-step
+        x, y, th = arc_step(x, y, th, 0.5 * (vr + vl) * dt, (vr - vl) / base * dt)
+        far = max(far, math.hypot(x, y))
+    return far
+
+
+def test_a_dead_spinning_robot_travels_farther_than_its_reported_speed_says():
+    """Robot 3 of the grid scenario with the cart, killed at 24 s: reported at -0.63 m/s
+    spinning at 3.83 rad/s, its wheels ramp to rest unevenly (the right one stops first,
+    the left one then drags it on) and its centre ends 0.46 m away; its speed alone allowed
+    0.18 m, and a robot kept out of that disc came within 0.85 m of it."""
+    v, u, base, accel = -0.63, 3.826, 0.8, 2.0
+    far = dead_robot_path(v, u, base, accel, STOP)
+    assert far > stopping(abs(v), accel, STOP) + 0.2
+    full, half = neighbour_hazard(v, 0.5 * u * base, 5.0, A, accel, TOP, STALE, SHARE, STOP)
+    assert half == -math.inf and full - A >= far
+
+
+@settings(max_examples=200, deadline=None)
+@given(v=st.floats(-3.0, 3.0), u=st.floats(-6.0, 6.0), base=st.floats(0.2, 1.0),
+       accel=st.floats(0.5, 10.0), hold=st.floats(0.0, 0.2))
+def test_a_silent_neighbour_s_disc_holds_however_its_wheels_brake(v, u, base, accel, hold):
+    """Whatever it was doing when its agent died, a silent neighbour's centre stays in the
+    disc the governor keeps out of (less a), its wheels braking each on its own."""
+    full, _ = neighbour_hazard(v, 0.5 * u * base, 5.0, A, accel, TOP, STALE, SHARE, hold)
+    assert dead_robot_path(v, u, base, accel, hold, dt=1e-3) <= full - A + 1e-3
 
 
 def limits(hx, hy, r=2.0, half=-math.inf, moving=0.0, theta=0.0, v_now=0.0, u_now=0.0,
