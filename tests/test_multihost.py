@@ -393,10 +393,10 @@ def test_link_fault_on_one_robot(tmp_path):
 
 
 def test_link_delay_on_one_robot(tmp_path):
-    """200 ms one-way delay on robot 2's link (both ways, through the relay) for 4 s early
+    """300 ms one-way delay on robot 2's link (both ways, through the relay) for 4 s early
     in the run, then none: no distance below a, and the swarm converges once the link
     recovers."""
-    delay = Delay(2, 200.0, 0.5, 4.5)
+    delay = Delay(2, 300.0, 0.5, 4.5)
     run = run_swarm(tmp_path, fault=delay, duration=FAULT_RUN)
     m, agents = run["metrics"], run["agents"]
     ages = {r: st["agent"]["neighbour_age_ms"] for r, st in agents.items()}
