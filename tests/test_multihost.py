@@ -56,7 +56,10 @@ def _can_netns() -> str | None:
 
 
 REASON = _can_netns()
-pytestmark = pytest.mark.skipif(REASON is not None, reason=f"multi-host test: {REASON}")
+# 21 processes on this 2-core shared VM, in wall-clock time: a stall of the machine can spoil
+# one run (its failure is reported); the same failure twice fails the test
+pytestmark = [pytest.mark.skipif(REASON is not None, reason=f"multi-host test: {REASON}"),
+              pytest.mark.flaky(reruns=1)]
 
 
 def sh(*cmd: str) -> None:
