@@ -11,7 +11,7 @@ stop in the free distance it owns, after a reaction time and at its braking dece
   is younger than the sharing age it runs the same governor on fresh data of this robot,
   so the free distance between them is shared half and half; older, it may also be dead,
   and this robot keeps out of what it would then still travel (its drivers' watchdog, then
-  each wheel braking to rest on its own: :func:`dead_travel`) as well. A silent neighbour
+  each wheel braking to rest on its own: :func:`stopping`) as well. A silent neighbour
   (older than the staleness limit): a static disc at its last known position grown by a
   and by what it could travel from its last report until it must have stopped, taken in
   full.
@@ -52,13 +52,13 @@ def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: flo
 
     Alive (age <= share_age): it runs the same governor on fresh data and keeps to its half
     of the gap beyond a and its travel since the stamp. Perhaps dead (older): also at most
-    the whole gap less what it would still travel (:func:`dead_travel`) at the fastest it
+    the whole gap less what it would still travel (:func:`stopping`) at the fastest it
     can now be going and turning. Silent (age > staleness): a static disc grown by what it
     could travel from its last report until it must have stopped, taken in full."""
     speed, turn = abs(speed), abs(turn)
     age = max(age, 0.0)
     if age > staleness:
-        return a + dead_travel(speed, turn, accel, stop_time), -math.inf
+        return a + stopping(speed, accel, stop_time, turn), -math.inf
     grow = top_speed * age
     now, turn_now = top_speed, turn
     if not math.isinf(accel):
@@ -67,31 +67,24 @@ def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: flo
         turn_now = turn + accel * age       # each wheel's speed changes at most accel
     if age <= share_age:
         return -math.inf, a + grow
-    return a + grow + dead_travel(now, turn_now, accel, stop_time), a + grow
+    return a + grow + stopping(now, accel, stop_time, turn_now), a + grow
 
 
-def dead_travel(speed: float, turn: float, accel: float, delay: float) -> float:
-    """The longest path [m] of the centre of a robot whose agent died moving at ``speed``
-    [m/s] with its wheels ``turn`` [m/s] apart (their ground speeds speed +- turn): its
-    drivers hold the command for ``delay`` [s], then ramp each wheel to rest on its own at
-    ``accel`` [m/s^2]. The centre moves at the mean of the wheels' speeds: while both turn
-    the same way the path is the mean of their braking distances, (v^2 + w^2) / (2 accel),
-    more than v^2 / (2 accel) as the slower wheel stops first; when they turn opposite ways
-    (a robot spinning) the mean holds at v until the slower one stops, then the faster one
-    alone drags the centre: v w / accel. At 2 m/s^2, a robot reported at v = 0.6 m/s
-    spinning with its wheels 1.5 m/s apart brakes over 0.45 m, not 0.09 m."""
+def stopping(speed: float, accel: float, delay: float, turn: float = 0.0) -> float:
+    """The longest path [m] of the centre of a robot moving at ``speed`` [m/s] with its
+    wheels ``turn`` [m/s] apart (their ground speeds speed +- turn) that holds its command
+    for ``delay`` [s], then ramps each wheel to rest on its own at ``accel`` [m/s^2]. The
+    centre moves at the mean of the wheels' speeds: while both turn the same way the path
+    is the mean of their braking distances, (v^2 + w^2) / (2 accel), more than
+    v^2 / (2 accel) as the slower wheel stops first; when they turn opposite ways (a robot
+    spinning) the mean holds at v until the slower one stops, then the faster one alone
+    drags the centre: v w / accel. At 2 m/s^2, a robot at v = 0.6 m/s spinning with its
+    wheels 1.5 m/s apart brakes over 0.45 m, not 0.09 m."""
     speed, turn = abs(speed), abs(turn)
     if math.isinf(accel):
         return speed * delay
     brake = (speed * speed + turn * turn if turn <= speed else 2.0 * speed * turn)
     return speed * delay + brake / (2.0 * accel)
-
-
-def stopping(speed: float, accel: float, delay: float) -> float:
-    """Distance [m] covered from ``speed`` [m/s] in ``delay`` [s], then braking at
-    ``accel`` [m/s^2]."""
-    brake = 0.0 if math.isinf(accel) else speed * speed / (2.0 * accel)
-    return speed * delay + brake
 
 
 def braking_speed(free: float, accel: float, reaction: float) -> float:

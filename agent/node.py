@@ -261,7 +261,8 @@ class Agent:
             return 0.0, 0.0
         self.reference = formation.point(0, now_w - mission.epoch)[:2]
         near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
-        hazards = self._hazards(neighbours, obs_x, obs_y, obs_r, len(near.stale_x), now_w)
+        hazards = self._hazards(pose, neighbours, obs_x, obs_y, obs_r, len(near.stale_x),
+                                now_w)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
         v, u, mode, governed, self.memory = law_step(
@@ -276,13 +277,14 @@ class Agent:
                                                      governed)
         return v, u
 
-    def _hazards(self, neighbours: Mapping[int, Received[StateMsg]], obs_x: list[float],
+    def _hazards(self, pose: tuple[float, float, float],
+                 neighbours: Mapping[int, Received[StateMsg]], obs_x: list[float],
                  obs_y: list[float], obs_r: list[float], n_stale: int, now_w: float
                  ) -> tuple[list[float], list[float], list[float], list[float], list[float]]:
-        """The safety governor's hazards (agent.governor): every neighbour heard from at its
-        reported position, grown by its data's age, and the detected obstacles grown by a
-        (``obs_*`` without their last ``n_stale`` entries: stale robots, which are among
-        the neighbours)."""
+        """The safety governor's hazards (agent.governor) around ``pose``: every neighbour
+        heard from at its reported position, grown by its data's age, and the detected
+        obstacles grown by a (``obs_*`` without their last ``n_stale`` entries: stale
+        robots, which are among the neighbours)."""
         s, r = self.s, self.s.robot
         top = min(s.control.v_max, r.v_wheel_max)
         stop_time = drivers.WATCHDOG + r.drive_latency
@@ -294,8 +296,7 @@ class Agent:
         reach = s.sensing_range + top * s.timeouts.staleness
         for rid, rec in neighbours.items():
             m = rec.msg
-            if rid == s.robot_id or math.hypot(m.x - self.odometry.pose[0],
-                                               m.y - self.odometry.pose[1]) > reach:
+            if rid == s.robot_id or math.hypot(m.x - pose[0], m.y - pose[1]) > reach:
                 continue
             age = now_w - m.stamp
             full, half = neighbour_hazard(m.v, 0.5 * m.u * r.wheel_base, age, s.control.a,

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.governor import braking_speed, dead_travel, neighbour_hazard, speed_limits, stopping
+from agent.governor import braking_speed, neighbour_hazard, speed_limits, stopping
 from agent.kinematics import arc_step
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
@@ -38,7 +38,7 @@ def test_an_older_neighbour_may_be_dead_and_still_travel_its_stopping_distance()
     turn = ACCEL * age                                      # and its wheels can be apart
     travel = min(TOP * age, 2.0 * age + 0.5 * ACCEL * age ** 2)
     assert half == pytest.approx(A + travel)
-    assert full == pytest.approx(A + travel + dead_travel(now, turn, ACCEL, STOP))
+    assert full == pytest.approx(A + travel + stopping(now, ACCEL, STOP, turn))
     assert full > A + travel + stopping(now, ACCEL, STOP)
 
 
