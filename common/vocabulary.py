@@ -35,7 +35,8 @@ class StateFlags(enum.IntFlag):
 class WheelFeedback:
     """What the two wheel drivers last reported."""
 
-    pos_rev: tuple[float, float]      # (right, left) encoder positions [rev], + forward
+    pos_rev: tuple[float, float]      # (right, left) encoder positions [rev], + forward, at
+    #                                   the newer estimate's arrival
     vel_rev_s: tuple[float, float]    # (right, left) encoder velocities [rev/s]
     age: float                        # s since the older of the two encoder estimates
     closed_loop: bool                 # both axes in CLOSED_LOOP_CONTROL

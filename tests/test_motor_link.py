@@ -171,6 +171,32 @@ def test_dropped_and_delayed_frames():
         r.close()
 
 
+def test_feedback_pairs_the_wheels_at_one_instant():
+    """Estimates of the two axes that arrive 10 ms apart are paired at the newer one's
+    arrival: the older position carried forward at its velocity."""
+    from common import drivers
+    channel = f"robot-{uuid.uuid4()}"
+    now = [0.0]
+    host_bus = can.Bus(interface="virtual", channel=channel)
+    peer = can.Bus(interface="virtual", channel=channel)
+    try:
+        host = WheelDrivers(host_bus, clock=lambda: now[0])
+        peer.send(encode(drivers.RIGHT_NODE, Cmd.GET_ENCODER_ESTIMATES, Pos_Estimate=1.0,
+                         Vel_Estimate=10.0))
+        host.poll()
+        now[0] = 0.01
+        peer.send(encode(drivers.LEFT_NODE, Cmd.GET_ENCODER_ESTIMATES, Pos_Estimate=2.0,
+                         Vel_Estimate=5.0))
+        host.poll()
+        now[0] = 0.015
+        fb = host.feedback()
+        assert fb.pos_rev == pytest.approx((1.1, 2.0))
+        assert fb.age == pytest.approx(0.015)
+    finally:
+        host_bus.shutdown()
+        peer.shutdown()
+
+
 def test_frames_sent_by_the_host_are_valid_for_any_peer():
     msg = encode(0, Cmd.SET_AXIS_STATE, Axis_Requested_State=AxisState.CLOSED_LOOP_CONTROL)
     assert msg.data[:4] == bytes([8, 0, 0, 0])
