@@ -45,6 +45,10 @@ class ControlParams:
     governor: bool = setting(True, doc="the safety governor limits the speed so that the "
                              "robot can stop before every hazard (false: the law alone, for "
                              "comparisons)")
+    sidestep: bool = setting(True, doc="in TRACK, a neighbour nearer than c on the way to "
+                             "the reference is passed on its right, b + hysteresis off "
+                             "(false: the paper's TRACK, which drives at it and waits for "
+                             "AVOID or the governor)")
 
     def __post_init__(self) -> None:
         validate(self)

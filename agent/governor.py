@@ -18,7 +18,8 @@ stop in the free distance it owns, after a reaction time and at its braking dece
 * **Limit.** For a hazard at distance d the robot owns f = min(d - R, (d - R_half) / 2).
   Moving along its heading (or against it, when reversing) at speed v, with c the cosine
   of the angle between the hazard's bearing and the headings the robot can have while it
-  stops (:func:`speed_limits`), it must satisfy c (v tau + v^2 / (2 a)) <= f, tau its
+  stops (:func:`speed_limits`), it must satisfy c s(v) <= f, s(v) its path when it holds
+  its command for its reaction time tau and then brakes each wheel (:func:`stopping`), tau its
   reaction time (the drivers' watchdog, should its own agent die, and the drive latency).
   Hazards away from the direction of travel (c <= 0) do not limit it, so a robot can
   always back away.
@@ -87,26 +88,35 @@ def stopping(speed: float, accel: float, delay: float, turn: float = 0.0) -> flo
     return speed * delay + brake / (2.0 * accel)
 
 
-def braking_speed(free: float, accel: float, reaction: float) -> float:
-    """The largest v [m/s] with v reaction + v^2 / (2 accel) <= free [m] (0 when free <= 0)."""
+def braking_speed(free: float, accel: float, reaction: float, turn: float = 0.0) -> float:
+    """The largest v [m/s] whose path :func:`stopping` (v, accel, reaction, turn) fits in
+    free [m] (0 when free <= 0); ``turn`` [m/s] as there, the wheels' half difference."""
     if free <= 0.0:
         return 0.0
+    turn = abs(turn)
     if math.isinf(accel):
         return free / reaction if reaction > 0.0 else math.inf
-    return accel * (math.sqrt(reaction * reaction + 2.0 * free / accel) - reaction)
+    if turn > 0.0:
+        slow = free / (reaction + turn / accel)    # v <= turn: path v reaction + v turn / a
+        if slow <= turn:
+            return slow
+    rest = free - turn * turn / (2.0 * accel)      # v > turn: (v^2 + turn^2) / (2 a)
+    return accel * (math.sqrt(reaction * reaction + 2.0 * rest / accel) - reaction)
 
 
 def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
                  haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq, haz_half: FloatSeq,
                  haz_moving: FloatSeq, accel: float, period: float, latency: float,
-                 turn_rate: float, top_speed: float = math.inf) -> tuple[float, float]:
+                 turn_rate: float, wheel_base: float,
+                 top_speed: float = math.inf) -> tuple[float, float]:
     """(forward, backward) speed limits [m/s] (inf: none) of a robot at (x, y, theta)
     [m, m, rad] moving at (v_now [m/s], u_now [rad/s]) among hazards (centre; exclusion
     radii [m]: of the whole free distance, and of the half this robot owns (-inf: no such
     rule, :func:`neighbour_hazard`); 1 for a neighbour that moves and 0 for a static disc),
-    braking at ``accel`` [m/s^2]. ``period`` [s] is how long a command holds (or the
-    drivers' watchdog, when the robot's agent may die). A command holds for ``period`` [s] and
-    reaches the wheels ``latency`` [s] (at most a period) late: until then the robot goes
+    braking at ``accel`` [m/s^2] each wheel (``wheel_base`` [m] apart) on its own, as its
+    drivers do should its agent die (:func:`stopping`). ``period`` [s] is how long a
+    command holds (or the drivers' watchdog, when the robot's agent may die); it reaches
+    the wheels ``latency`` [s] (at most a period) late: until then the robot goes
     on at v_now (its last command), give or take one period's ramp; a robot already faster
     than it may go brakes at the full ramp.
 
@@ -119,11 +129,12 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     fwd = bwd = math.inf
     reaction = period + latency
     ramp = 0.0 if math.isinf(accel) else accel * period   # m/s the speed may differ by in flight
-    stop_time = reaction + (0.0 if math.isinf(accel) else abs(v_now) / accel)
+    turn = 0.5 * abs(u_now) * wheel_base                 # m/s, the wheels' half difference
+    stop_time = reaction + (0.0 if math.isinf(accel) else (abs(v_now) + turn) / accel)
     sweep = u_now * stop_time
     spread = 0.5 * abs(sweep) + turn_rate * reaction
     middle = theta + 0.5 * sweep
-    reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period)
+    reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period, turn)
     for h in range(len(haz_r)):
         dx, dy = haz_x[h] - x, haz_y[h] - y
         d = math.sqrt(dx * dx + dy * dy)
@@ -139,7 +150,8 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
             c = 1.0 if d < EPS or off <= 0.0 else math.cos(off)
             if c > EPS:
                 going = max(-v_now if backward else v_now, 0.0)      # m/s this way now
-                limit = braking_speed(free / c - (going + ramp) * latency, accel, period)
+                limit = braking_speed(free / c - (going + ramp) * latency, accel, period,
+                                      turn)
                 if going > limit:        # behind the braking curve: brake at the full ramp
                     limit = 0.0
                 if backward:

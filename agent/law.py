@@ -16,6 +16,11 @@ Every period the robot picks one of three modes:
 * TRACK (Theorem 1) otherwise: e = p - p_d, theta_d = atan2(-e), u = -K_theta e_theta +
   theta_d_hat_dot, v = K cos(e_theta) min(D_max, |e|).
 
+On a robot with a braking deceleration a_brake, TRACK and ROTATE close in on the reference
+no faster than w + sqrt(a_brake |e|), w the reference's speed away from the robot (p_d_dot
+along -e), so that it arrives instead of overshooting (the paper's K |e| asks for a
+deceleration of K v).
+
 Then |u| is clipped to u_max (|v| <= K D_max holds by construction), the safety governor
 (:mod:`agent.governor`) lowers |v| only as far as needed for the robot to stop before every
 hazard, and the command is brought within what the wheel drivers can follow: the wheel speed
@@ -72,6 +77,7 @@ class LawParams(NamedTuple):
     ramp: float         # rev/s^2 per wheel (inf: none)
     watchdog: float     # s the drivers go on with the last command should the agent die
     governor: bool      # the safety governor acts
+    sidestep: bool      # TRACK passes a neighbour in the way on its right
 
     @classmethod
     def of(cls, control: ControlParams, robot: RobotParams | None) -> "LawParams":
@@ -82,7 +88,8 @@ class LawParams(NamedTuple):
                    robot.wheel_speed_limit, robot.wheel_ramp, drivers.WATCHDOG)
                   if robot is not None else (inf, 0.0, 1.0, 1.0, inf, inf, 0.0))
         return cls(control.K, control.K_theta, control.D_max, control.K_ij, control.b,
-                   control.c, control.u_max, control.hysteresis, *limits, control.governor)
+                   control.c, control.u_max, control.hysteresis, *limits, control.governor,
+                   control.sidestep)
 
 
 class LawMemory(NamedTuple):
@@ -100,15 +107,16 @@ class LawMemory(NamedTuple):
     wheel_l: float = 0.0        # rev/s, the left wheel's
 
 
-def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float,
-             nbr_x: FloatSeq, nbr_y: FloatSeq, obs_x: FloatSeq, obs_y: FloatSeq,
+def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_vx: float,
+             ref_vy: float, nbr_x: FloatSeq, nbr_y: FloatSeq, obs_x: FloatSeq, obs_y: FloatSeq,
              obs_r: FloatSeq, haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq,
              haz_half: FloatSeq, haz_moving: FloatSeq, mem: LawMemory, p: LawParams,
              dt: float) -> tuple[float, float, int, float, LawMemory]:
     """One period for one robot: (v [m/s], u [rad/s], mode (a :class:`Mode` value), the
     speed [m/s] the governor allowed when it lowered the command (inf: it did not), memory).
 
-    (x, y, theta) is the robot's pose, (ref_x, ref_y) its reference p_d(t); ``nbr_x``,
+    (x, y, theta) is the robot's pose, (ref_x, ref_y) its reference p_d(t) and (ref_vx,
+    ref_vy) [m/s] the reference's velocity p_d_dot(t); ``nbr_x``,
     ``nbr_y`` the neighbours in range (extrapolated to now); ``obs_x``, ``obs_y``, ``obs_r``
     the obstacles in range (centre and radius); ``haz_*`` the governor's hazards (centre,
     exclusion radii [m] of the whole and of the half free distance, moving or not:
@@ -214,8 +222,28 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float,
         mode = AVOID
         ff = 0.0
 
+    # TRACK: pass the nearest neighbour in the way on its right, b + hysteresis off
+    if mode == TRACK and p.sidestep:
+        passing, nearest, heading = p.b + p.hysteresis, min(p.c, D), theta_d
+        for j in range(n_nbr):
+            dx, dy = nbr_x[j] - x, nbr_y[j] - y
+            d = math.sqrt(dx * dx + dy * dy)
+            if EPS < d < nearest:
+                phi = math.atan2(dy, dx)
+                cone = HALF_PI if d <= passing else math.asin(passing / d)
+                if abs(wrap_angle(theta_d - phi)) < cone:
+                    nearest, heading = d, phi - cone
+        if nearest < min(p.c, D):
+            theta_d, ff = heading, 0.0
+
     e_theta = 0.0 if dist < EPS else wrap_angle(theta - theta_d)
-    v = p.K * math.cos(e_theta) * min(p.D_max, dist)
+    speed = p.K * min(p.D_max, dist)
+    if mode != AVOID and not math.isinf(p.accel):
+        # arrive, do not overshoot: close in on the reference no faster than the robot can
+        # shed at half its braking deceleration (the other half is left for turning)
+        away = -(ref_vx * ex + ref_vy * ey) / D if D > EPS else 0.0   # m/s, p_d_dot along -e
+        speed = max(min(speed, away + math.sqrt(p.accel * D)), 0.0)
+    v = math.cos(e_theta) * speed
     u = min(max(-p.K_theta * e_theta + ff, -p.u_max), p.u_max)
 
     # the safety governor: no faster toward a hazard than lets the robot stop before it
@@ -226,27 +254,30 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float,
     if p.governor:
         fwd, bwd = speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r, haz_half,
                                 haz_moving, p.accel, max(dt, p.watchdog), p.latency, p.u_max,
-                                top)
+                                p.wheel_base, top)
     allowed = fwd if v >= 0.0 else bwd
     governed = allowed if abs(v) > allowed and allowed < top else math.inf
     v = min(max(v, -bwd), fwd)
 
-    # what the wheels can follow: their speed limit, then their ramp from the last command;
-    # slowing down comes first and turning gets the ramp left over (the governor counts on
-    # braking at the full ramp)
+    # what the wheels can follow: their speed limit, then their ramp from the last command.
+    # While the robot goes faster than the governor allows, slowing down takes the ramp
+    # first (the governor counts on braking at the full ramp) and turning gets what is left;
+    # otherwise turning comes first, as the law slows down by itself while the heading is off
+    # (v ~ cos e_theta)
     wr, wl = mem.wheel_r, mem.wheel_l
     if not (math.isinf(p.speed_limit) and math.isinf(p.ramp)):
         tr, tl = wheel_command(v, u, p.wheel_radius, p.wheel_base, p.speed_limit)
         change = p.ramp * dt
-        slowing = (tr + tl) * math.copysign(1.0, wr + wl) < abs(wr + wl)
-        if not slowing and math.isinf(governed):
-            wr += min(max(tr - wr, -change), change)
-            wl += min(max(tl - wl, -change), change)
+        want_common, want_turn = 0.5 * (tr + tl - wr - wl), 0.5 * (tr - tl - wr + wl)
+        if -bwd <= v_now <= fwd:
+            turn = min(max(want_turn, -change), change)
+            left = change - abs(turn)
+            common = min(max(want_common, -left), left)
         else:
-            common = min(max(0.5 * (tr + tl - wr - wl), -change), change)
+            common = min(max(want_common, -change), change)
             left = change - abs(common)
-            turn = min(max(0.5 * (tr - tl - wr + wl), -left), left)
-            wr, wl = wr + common + turn, wl + common - turn
+            turn = min(max(want_turn, -left), left)
+        wr, wl = wr + common + turn, wl + common - turn
         # within the speed limit (a set-point already at it may not step beyond)
         wr = min(max(wr, -p.speed_limit), p.speed_limit)
         wl = min(max(wl, -p.speed_limit), p.speed_limit)

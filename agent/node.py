@@ -259,14 +259,15 @@ class Agent:
         formation = self._formation_place(mission)
         if formation is None:
             return 0.0, 0.0
-        self.reference = formation.point(0, now_w - mission.epoch)[:2]
+        rx, ry, rvx, rvy = formation.point(0, now_w - mission.epoch)
+        self.reference = (rx, ry)
         near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
         hazards = self._hazards(pose, neighbours, obs_x, obs_y, obs_r, len(near.stale_x),
                                 now_w)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
         v, u, mode, governed, self.memory = law_step(
-            *pose, *self.reference, near.fresh_x, near.fresh_y, obs_x, obs_y, obs_r,
+            *pose, rx, ry, rvx, rvy, near.fresh_x, near.fresh_y, obs_x, obs_y, obs_r,
             *hazards, self.memory, self._law_params, max(dt, 1e-6))
         self.law_mode = Mode(mode)
         self.counters.law_steps += 1

@@ -17,7 +17,7 @@ import numpy as np
 from agent.config import ControlParams, RobotParams
 from agent.law import LawMemory, LawParams, law_step
 
-POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0)
+POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0, 2.0, 0.0)   # m, rad; reference m and m/s
 NBR_X, NBR_Y = [2.0, 3.0, -1.0], [1.0, -2.0, 4.0]
 OBS_X, OBS_Y, OBS_R = [6.0], [0.0], [1.0]
 

@@ -222,9 +222,10 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
                         mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4], mem_f[i, 5],
                         mem_f[i, 6])
-        v, u, mode, allowed, new = law_step(x, y, own[i, 2], rx, ry, nbr_x[:m], nbr_y[:m],
-                                            o_x[:k], o_y[:k], o_r[:k], h_x[:n_h], h_y[:n_h],
-                                            h_r[:n_h], h_h[:n_h], h_m[:n_h], mem, p, period)
+        v, u, mode, allowed, new = law_step(x, y, own[i, 2], rx, ry, rvx, rvy, nbr_x[:m],
+                                            nbr_y[:m], o_x[:k], o_y[:k], o_r[:k], h_x[:n_h],
+                                            h_y[:n_h], h_r[:n_h], h_h[:n_h], h_m[:n_h], mem, p,
+                                            period)
         out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2], out_cmd[i, 3] = v, u, mode, allowed
         out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
         out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey

@@ -55,6 +55,7 @@ def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None 
     if IMPL == "compiled":            # arrays, as the batch simulator passes them
         law = compiled.kernels().law_step
         columns = tuple(np.array(c, dtype=float) for c in columns)
-    v, u, mode, governed, memory = law(*case.pose, *case.ref, *columns, mem or LawMemory(),
-                                       LawParams.of(params, robot), params.period)
+    v, u, mode, governed, memory = law(*case.pose, *case.ref, 0.0, 0.0, *columns,
+                                       mem or LawMemory(), LawParams.of(params, robot),
+                                       params.period)
     return Output([v], [u], [mode], memory, governed)

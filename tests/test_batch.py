@@ -172,3 +172,36 @@ def test_drive_latency_delays_the_wheels(latency, still_periods):
     ideal = simulate(np.array([1]), np.zeros((1, 3)), form, Obstacles.empty(), ControlParams(),
                      robot, SimOptions(duration=0.2))
     assert ideal.pose[1, 0, 0] > 0.0
+
+
+CART = RobotParams(wheel_radius=0.0825, wheel_base=0.8, wheel_speed_limit=5.79,
+                   wheel_ramp=3.86, drive_latency=0.02)      # robots/cart.toml: 3 m/s, 2 m/s^2
+
+
+def cart_run(pose, centre, velocity=(0.0, 0.0), duration=30.0):
+    form = Formation(np.zeros((1, 2)), centre, velocity)
+    return simulate(np.array([1]), np.array([pose], dtype=float), form, Obstacles.empty(),
+                    ControlParams(), CART, SimOptions(duration=duration,
+                                                      plant=PlantKind.WHEELS))
+
+
+def test_a_cart_arrives_at_its_reference_without_overshooting():
+    """At 3 m/s and 2 m/s^2 the paper's v = K |e| (a deceleration of K v = 12 m/s^2 asked)
+    would carry the cart past its reference; the law closes in at what it can shed."""
+    res = cart_run((0.0, 0.0, 0.0), (20.0, 0.0))
+    x = res.pose[:, 0, 0]
+    assert res.v.max() > 2.9                          # it drove at its top speed
+    assert x.max() < 20.05 and abs(x[-1] - 20.0) < 0.05
+
+
+def test_a_cart_turns_round_to_a_reference_behind_it_and_settles():
+    """Facing away from a reference coming toward it: the cart turns, brakes as the
+    reference passes, turns again and follows, its heading settling (no endless spin, as
+    when braking took the whole ramp and left the turn rate frozen)."""
+    res = cart_run((0.0, 0.0, 0.3), (-20.0, 0.0), (1.0, 0.0), duration=30.0)
+    err = np.hypot(*(res.pose[:, 0, :2] - res.ref[:, 0]).T)
+    late = res.t > 20.0
+    assert err[late].max() < 1.0 / ControlParams().K + 0.25
+    assert np.abs(res.u[late, 0]).max() < 0.05
+    turned = np.abs(np.diff(np.unwrap(res.pose[:, 0, 2]))).sum()
+    assert turned < 3 * math.pi                       # about two half turns, no spinning

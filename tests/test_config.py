@@ -78,9 +78,10 @@ def test_control_params_as_runtime_parameters():
     names = [p.name for p in CONTROL_PARAMS]
     assert names == ["BS_K", "BS_K_THETA", "BS_D_MAX", "BS_K_IJ", "BS_A", "BS_B", "BS_C",
                      "BS_PERIOD", "BS_U_MAX", "BS_HYST", "BS_SHARE_AGE"]
-    # every numeric field, in order; the governor switch is no runtime parameter
+    # every numeric field, in order; the governor and sidestep switches are no runtime
+    # parameters
     assert [p.field for p in CONTROL_PARAMS] == [f.name for f in dataclasses.fields(ControlParams)
-                                                 if f.name != "governor"]
+                                                 if f.name not in ("governor", "sidestep")]
     assert [p.index for p in CONTROL_PARAMS] == list(range(len(names)))
     period = CONTROL_PARAMS[names.index("BS_PERIOD")]
     assert period.read_only and "read-only at runtime" in period.read_only

@@ -91,9 +91,9 @@ def test_a_silent_neighbour_s_disc_holds_however_its_wheels_brake(v, u, base, ac
 
 
 def limits(hx, hy, r=2.0, half=-math.inf, moving=0.0, theta=0.0, v_now=0.0, u_now=0.0,
-           turn_rate=0.0):
+           turn_rate=0.0, wheel_base=0.0):
     return speed_limits(0.0, 0.0, theta, v_now, u_now, [hx], [hy], [r], [half], [moving],
-                        ACCEL, 0.04, 0.0, turn_rate)
+                        ACCEL, 0.04, 0.0, turn_rate, wheel_base)
 
 
 def test_a_hazard_ahead_limits_forward_only():
@@ -114,6 +114,26 @@ def test_a_turning_robot_counts_what_its_heading_sweeps_while_it_stops():
     assert limits(0.0, 5.0, v_now=2.0, u_now=0.0)[0] == math.inf
     assert limits(0.0, 5.0, v_now=2.0, u_now=2.0)[0] == pytest.approx(
         braking_speed(3.0, ACCEL, 0.04))
+
+
+@settings(max_examples=200, deadline=None)
+@given(free=st.floats(0.01, 20.0), accel=st.floats(0.5, 30.0), reaction=st.floats(0.0, 0.5),
+       turn=st.floats(0.0, 5.0))
+def test_braking_speed_fills_exactly_the_free_distance_however_the_wheels_turn(
+        free, accel, reaction, turn):
+    """The allowed speed is the fastest whose path with both wheels braking on their own,
+    the robot turning with them ``turn`` m/s apart, ends at the free distance."""
+    v = braking_speed(free, accel, reaction, turn)
+    assert stopping(v, accel, reaction, turn) == pytest.approx(free, rel=1e-9, abs=1e-9)
+
+
+def test_a_spinning_robot_may_go_slower_toward_a_hazard():
+    """Its wheels 4 m/s apart (4 rad/s on a 1 m base): each brakes on its own, the outer
+    one for longer, and the centre goes farther than when braking straight."""
+    straight = limits(5.0, 0.0)[0]
+    spinning = limits(5.0, 0.0, u_now=4.0, turn_rate=0.0, wheel_base=1.0)[0]
+    assert spinning == pytest.approx(braking_speed(3.0, ACCEL, 0.04, 2.0))
+    assert spinning < 0.85 * straight
 
 
 def test_inside_a_hazard_the_robot_may_only_back_away():
@@ -138,7 +158,7 @@ def test_braking_from_the_allowed_speed_stops_outside_the_hazard(d0, accel, v_to
     for k in range(int(30.0 / dt)):
         if k % steps_per_period == 0:
             fwd, _ = speed_limits(x, 0.0, 0.0, command, 0.0, [d0], [0.0], [radius],
-                                  [-math.inf], [0.0], accel, period, latency, 0.0)
+                                  [-math.inf], [0.0], accel, period, latency, 0.0, 0.6)
             step = accel * period                    # the law's ramp, as the wheels'
             command = min(max(min(v_top, fwd), command - step), command + step)
             if command == 0.0 and v == 0.0:

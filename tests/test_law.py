@@ -194,3 +194,26 @@ def test_heading_rate_feed_forward_from_the_error_difference():
                     has_prev=True)
     out = step(single([0, 0, 0], [10, 0]), mem)
     assert out.u[0] == pytest.approx(0.01 / P.period, rel=1e-3)
+
+
+def test_track_passes_a_neighbour_in_the_way_on_its_right():
+    """A neighbour 3 m ahead (within c) on the way to a reference 20 m ahead: the robot
+    heads asin((b + hysteresis)/3) = 56 degrees to the right of it; the paper's TRACK
+    (sidestep = false) drives straight at it."""
+    out = step(single([0, 0, 0], [20, 0], nbrs=[(3, 0)]))
+    assert out.mode[0] == Mode.TRACK
+    assert out.u[0] == pytest.approx(-P.K_theta * math.asin((P.b + P.hysteresis) / 3.0))
+    paper = step(single([0, 0, 0], [20, 0], nbrs=[(3, 0)]), params=ControlParams(sidestep=False))
+    assert paper.u[0] == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("nbr", [(1.0, 3.0), (5.0, 0.0), (-3.0, 0.0)])
+def test_track_does_not_sidestep_a_neighbour_out_of_the_way(nbr):
+    """Outside the cone of passing, farther than c, or behind: the paper's heading."""
+    out = step(single([0, 0, 0], [20, 0], nbrs=[nbr]))
+    assert out.mode[0] == Mode.TRACK and out.u[0] == pytest.approx(0.0)
+
+
+def test_track_does_not_sidestep_a_neighbour_beyond_the_reference():
+    out = step(single([0, 0, 0], [2, 0], nbrs=[(3, 0)]))
+    assert out.mode[0] == Mode.TRACK and out.u[0] == pytest.approx(0.0)

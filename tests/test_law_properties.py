@@ -4,6 +4,7 @@ does."""
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -52,7 +53,7 @@ def cases(draw):
 
 def run(law, case, columns=list, lp=LP):
     pose, ref, *cols, mem = case
-    return law(*pose, *ref, *(columns(c) for c in cols), mem, lp, P.period)
+    return law(*pose, *ref, 1.0, -0.5, *(columns(c) for c in cols), mem, lp, P.period)
 
 
 @settings(max_examples=300, deadline=None)
@@ -101,6 +102,22 @@ def test_compiled_law_equals_the_interpreted_one(case, lp):
 @settings(max_examples=100, deadline=None)
 @given(st.floats(0.0, 1e-12), angle)
 def test_reference_at_the_robot(offset, theta):
-    v, u, _, _, _ = law_step(1.0, 2.0, theta, 1.0 + offset, 2.0, [], [], [], [], [], [], [],
-                             [], [], [], LawMemory(), LP, P.period)
+    v, u, _, _, _ = law_step(1.0, 2.0, theta, 1.0 + offset, 2.0, 0.0, 0.0, [], [], [], [], [],
+                             [], [], [], [], [], LawMemory(), LP, P.period)
     assert math.isfinite(u) and abs(v) <= P.K * 1e-12 + 1e-15
+
+
+def test_turning_takes_the_ramp_first_unless_the_robot_must_brake():
+    """Driving ahead at 2 rev/s with its reference behind and to the left: the law wants to
+    turn and reverse. Free of hazards the turn gets the whole ramp (the law slows by itself
+    while its heading is off); with a hazard close ahead the robot is behind its braking
+    curve and braking takes the ramp first."""
+    step = CART.wheel_ramp * P.period
+    mem = LawMemory(wheel_r=2.0, wheel_l=2.0)
+    free = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], [], [],
+                    [], mem, LP_CART, P.period)[4]
+    assert free.wheel_r - free.wheel_l == pytest.approx(2 * step)
+    braking = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [1.2], [0.0],
+                       [1.0], [-math.inf], [0.0], mem, LP_CART, P.period)[4]
+    assert braking.wheel_r + braking.wheel_l == pytest.approx(4.0 - 2 * step)
+    assert braking.wheel_r == pytest.approx(braking.wheel_l)
