@@ -16,7 +16,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from agent.config import ControlParams
+from agent.config import ControlParams, RobotParams
 from common.schema import from_table
 from hil.campaign_spec import families_module, run_key
 
@@ -35,6 +35,8 @@ def scenario_doc(desc: Mapping[str, Any]) -> dict[str, Any]:
     if "micro" in desc:
         doc = dict(families.micro_doc(desc["micro"], desc["seed"], **kwargs))
     else:
+        if desc.get("robot") is not None:       # slots the profile's robots can keep up with
+            kwargs["top_speed"] = from_table(RobotParams, desc["robot"], "[robot]").v_wheel_max
         doc = dict(families.family_doc(desc["family"], desc["seed"], **kwargs))
     if desc["control"]:
         doc["control"] = dict(desc["control"])

@@ -37,6 +37,7 @@ OMEGA = (0.05, 0.1)          # rad/s, turn rate of rotating_circle (either sense
 EPS = 1e-3                   # m, kept inside every bound so that rounding cannot break it
 DEFAULT_CONTROL = ControlParams()
 AREA_PER_OBSTACLE = 150.0    # m^2 of field per disc (sparse) or chain (cluttered) aimed at
+SLOT_SHARE = 0.5             # of a robot's top speed, the fastest its formation's slots move
 
 Chain = list[tuple[float, float, float]]     # discs: x, y, radius [m]
 
@@ -126,11 +127,15 @@ def _duration(duration: float, where: str) -> float:
 
 # --- families ---------------------------------------------------------------------------
 def family_doc(family: Mapping[str, Any], seed: int, control: ControlParams = DEFAULT_CONTROL,
-               duration: float = 40.0, where: str = "family") -> dict[str, Any]:
-    """One scenario of ``family`` drawn with ``seed``, lasting ``duration`` [s]."""
+               duration: float = 40.0, where: str = "family",
+               top_speed: float = math.inf) -> dict[str, Any]:
+    """One scenario of ``family`` drawn with ``seed``, lasting ``duration`` [s], for robots
+    of ``top_speed`` [m/s]: no slot of the formation moves faster than SLOT_SHARE of it
+    (the reference's speed and turn rate are scaled down together), so that the robots can
+    catch up with their slots and still have speed left to go round what is in the way."""
     duration = _duration(duration, where)
     fam, scene, angle = family_scene(family, seed, control, where)
-    return scene.rotated(angle).doc(fam.name(seed), duration)
+    return scene.within(SLOT_SHARE * top_speed).rotated(angle).doc(fam.name(seed), duration)
 
 
 def family_scene(family: Mapping[str, Any], seed: int, control: ControlParams = DEFAULT_CONTROL,

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,10 @@ def add_parser(sub: Subparsers) -> None:
                       "through_own_reference, late_arrival")
     p.add_argument("--seed", type=int, required=True, help="seed (integer >= 0)")
     p.add_argument("--out", required=True, metavar="FILE.toml", help="scenario file to write")
+    p.add_argument("--robot", metavar="FILE",
+                   help="robot profile (robots/*.toml): written as the scenario's [robot] "
+                        "(wheels plant), and a family's slots move at most half its top "
+                        "speed")
     p.add_argument("--duration", type=positive,
                    help="simulated time [s] (default: 40 for a family, the case's for a micro "
                         "case)")
@@ -58,13 +63,24 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from hil.scenario import load_scenario
     if args.seed < 0:
         raise BadInput(f"--seed: expected an integer >= 0, got {args.seed}")
+    robot = None
+    if args.robot:
+        import dataclasses
+
+        from hil.robot_profile import load_robot_profile
+        robot = load_robot_profile(args.robot)
     if args.family is not None:
+        top = robot.v_wheel_max if robot is not None else math.inf
         doc = family_doc(parse_pairs(args.family), args.seed, duration=args.duration or 40.0,
-                         where="--family")
+                         where="--family", top_speed=top)
         how = f"--family {args.family!r}"
     else:
         doc = micro_doc(args.micro, args.seed, duration=args.duration, where="--micro")
         how = f"--micro {args.micro}"
+    if robot is not None:
+        doc["robot"] = dataclasses.asdict(robot)
+        doc["sim"] = {**doc.get("sim", {}), "plant": "wheels"}
+        how += f" --robot {args.robot}"
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(f"# boundswarm generate {how} --seed {args.seed}\n" + toml_text.dumps(doc),

@@ -46,6 +46,21 @@ class Scene:
         turned = self.offsets @ rot(self.omega * t).T
         return self.center0 + self.velocity * t + turned
 
+    def slot_speed(self) -> float:
+        """The fastest any slot moves [m/s]: the reference's speed plus the turn rate times
+        the farthest offset."""
+        reach = float(np.hypot(self.offsets[:, 0], self.offsets[:, 1]).max(initial=0.0))
+        return float(np.hypot(*self.velocity)) + abs(self.omega) * reach
+
+    def within(self, speed: float) -> Scene:
+        """The scene with the formation's velocity and turn rate scaled down together so that
+        no slot moves faster than ``speed`` [m/s] (unchanged when none does)."""
+        fastest = self.slot_speed()
+        if fastest <= speed:
+            return self
+        k = speed / fastest
+        return replace(self, velocity=self.velocity * k, omega=self.omega * k)
+
     def rotated(self, angle: float) -> Scene:
         """The whole scene turned by ``angle`` [rad] about the world origin."""
         r = rot(angle)

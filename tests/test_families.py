@@ -3,6 +3,7 @@ deterministic, holding the geometry they promise; and ``boundswarm generate``.""
 import itertools
 import math
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from hil.families import (
     KINDS,
     MICRO_CASES,
     OMEGA,
+    SLOT_SHARE,
     SLOTS,
     chains,
     family_doc,
@@ -24,6 +26,7 @@ from hil.families import (
     micro_doc,
     micro_scene,
 )
+from hil.robot_profile import load_robot_profile
 from hil.scenario import ScenarioError, load_scenario, parse_scenario
 from hil.scene import rot, wrap
 from hil.toml_text import dumps
@@ -297,6 +300,45 @@ def test_generate_writes_a_scenario_file(tmp_path, capsys):
     assert main(["generate", "--micro", "narrow_gap", "--seed", "2", "--out", str(out),
                  "--duration", "12"]) == 0
     assert load_scenario(out).duration == 12.0
+
+
+def slot_speed(doc):
+    """The fastest a slot of the scenario's formation moves [m/s]."""
+    f = doc["formation"]
+    reach = max(math.hypot(*o) for o in f["offsets"])
+    return math.hypot(*f["velocity"]) + abs(f["omega"]) * reach
+
+
+@pytest.mark.parametrize("kind", ["rotating_circle", "grid"])
+@pytest.mark.parametrize("top", [1.5, 3.0, math.inf])
+def test_slots_move_no_faster_than_the_robots_can_keep_up_with(kind, top):
+    """A 20-robot circle turning at 0.05-0.1 rad/s while it moves at 2 m/s has slots faster
+    than a 1.5 m/s robot: speed and turn rate are scaled down together to half its top
+    speed; everything else (and any formation slow enough) is unchanged."""
+    family = {"kind": kind, "robots": 20}
+    free = family_doc(family, 4)
+    bounded = family_doc(family, 4, top_speed=top)
+    want = min(slot_speed(free), SLOT_SHARE * top)
+    assert slot_speed(bounded) == pytest.approx(want, rel=1e-4)
+    f, g = free["formation"], bounded["formation"]
+    if kind == "rotating_circle" and top < math.inf:
+        assert slot_speed(free) > SLOT_SHARE * top
+        assert g["omega"] / f["omega"] == pytest.approx(g["velocity"][0] / f["velocity"][0],
+                                                        rel=1e-3)
+    assert {k: v for k, v in bounded.items() if k != "formation"} == \
+        {k: v for k, v in free.items() if k != "formation"}
+
+
+def test_generate_with_a_robot_profile(tmp_path):
+    out, profile = tmp_path / "heavy.toml", Path(__file__).parent.parent / "robots/heavy.toml"
+    assert main(["generate", "--family", "kind=rotating_circle,robots=20", "--seed", "1",
+                 "--robot", str(profile), "--out", str(out)]) == 0
+    sc = load_scenario(out)
+    heavy = load_robot_profile(profile)
+    assert sc.robot == heavy and sc.plant.value == "wheels"
+    reach = np.hypot(*sc.formation.offsets.T).max()
+    assert np.hypot(*sc.formation.velocity) + abs(sc.formation.omega) * reach == \
+        pytest.approx(SLOT_SHARE * heavy.v_wheel_max, rel=1e-4)
 
 
 def test_generate_help_names_every_micro_case(capsys):
