@@ -55,20 +55,24 @@ def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: flo
     of the gap beyond a and its travel since the stamp. Perhaps dead (older): also at most
     the whole gap less what it would still travel (:func:`stopping`) at the fastest it
     can now be going and turning. Silent (age > staleness): a static disc grown by what it
-    could travel from its last report until it must have stopped, taken in full."""
+    could travel from its last report until it must have stopped, having died as late as
+    the staleness limit after that report (the perhaps-dead disc at that age: the disc
+    never shrinks as the data ages), taken in full."""
     speed, turn = abs(speed), abs(turn)
-    age = max(age, 0.0)
-    if age > staleness:
-        return a + stopping(speed, accel, stop_time, turn), -math.inf
+    silent = age > staleness
+    age = min(max(age, 0.0), staleness)     # silent: it may have died as late as that
     grow = top_speed * age
     now, turn_now = top_speed, turn
     if not math.isinf(accel):
         grow = min(grow, speed * age + 0.5 * accel * age * age)
         now = min(now, speed + accel * age)
         turn_now = turn + accel * age       # each wheel's speed changes at most accel
+    full = a + grow + stopping(now, accel, stop_time, turn_now)
+    if silent:
+        return full, -math.inf
     if age <= share_age:
         return -math.inf, a + grow
-    return a + grow + stopping(now, accel, stop_time, turn_now), a + grow
+    return full, a + grow
 
 
 def stopping(speed: float, accel: float, delay: float, turn: float = 0.0) -> float:

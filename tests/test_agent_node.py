@@ -4,7 +4,7 @@ import pytest
 from fakes import MirrorMotor, SharedSwarm
 from helpers import SimClock
 
-from agent.config import ControlParams
+from agent.config import ControlParams, RobotParams
 from agent.loop import FixedRateLoop
 from agent.node import Agent
 from agent.settings import AgentSettings
@@ -12,7 +12,8 @@ from common.payloads import MissionMsg, ObstaclesMsg
 from common.vocabulary import AgentMode, Mode, StateFlags
 
 
-def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in=0.0):
+def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in=0.0,
+               robot=None):
     clock = SimClock()
     net = SharedSwarm(clock)
     ids = np.arange(1, len(poses) + 1)
@@ -21,7 +22,7 @@ def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in
     agents = []
     for rid, pose in zip(ids, poses):
         s = AgentSettings(robot_id=int(rid), swarm="t", initial_pose=tuple(pose),
-                          autostart=True)
+                          autostart=True, **({"robot": robot} if robot else {}))
         agents.append(Agent(s, MirrorMotor(clock), net.port(int(rid)), clock))
     return clock, net, agents
 
@@ -104,8 +105,13 @@ def test_driver_error_triggers_failsafe_with_its_name():
 
 
 def test_stale_neighbour_is_avoided_as_a_static_obstacle():
+    """On a cart (3 m/s, 2 m/s^2): the governor keeps it out of the silent robot's disc
+    (where that could have driven before it must have stopped: 1.9 m), and the law goes
+    round it as an obstacle (b beyond its a/2 radius)."""
+    cart = RobotParams(wheel_radius=0.0825, wheel_base=0.8, wheel_speed_limit=5.79,
+                       wheel_ramp=3.86, drive_latency=0.02)
     clock, net, agents = make_swarm([(0.0, 0.0, 0.0), (4.0, 0.0, 0.0)],
-                                    [(0.0, 0.0), (0.0, 0.0)], center0=(12.0, 0.0))
+                                    [(0.0, 0.0), (0.0, 0.0)], center0=(12.0, 0.0), robot=cart)
     a, b = agents
     b.tick()                                   # b publishes once, then goes silent
     clock.now += 1.0                           # older than the 0.5 s staleness

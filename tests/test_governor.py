@@ -43,9 +43,14 @@ def test_an_older_neighbour_may_be_dead_and_still_travel_its_stopping_distance()
 
 
 def test_a_silent_neighbour_is_a_static_disc_grown_until_it_must_have_stopped():
+    """Reported at 2 m/s straight: it may have driven on until the staleness limit, its
+    speed reaching 3 m/s and its wheels drifting up to ACCEL x STALE apart, then held its
+    command for the stop time and braked each wheel."""
     full, half = neighbour_hazard(2.0, 0.0, 5.0, A, ACCEL, TOP, STALE, SHARE, STOP)
     assert half == -math.inf
-    assert full == pytest.approx(A + 2.0 * STOP + 2.0 ** 2 / (2 * ACCEL))
+    now, apart = 2.0 + ACCEL * STALE, ACCEL * STALE
+    assert full == pytest.approx(A + 2.0 * STALE + 0.5 * ACCEL * STALE ** 2 + now * STOP
+                                 + (now ** 2 + apart ** 2) / (2 * ACCEL))
     assert neighbour_hazard(2.0, 0.0, 50.0, A, ACCEL, TOP, STALE, SHARE, STOP)[0] == full
 
 
@@ -188,3 +193,31 @@ def test_real_robots_keep_their_distance_in_the_bundled_scenarios(scenario, prof
     assert m["collisions"] == 0
     assert m["min_pair_distance"] > sc.control.a
     assert m["min_obstacle_clearance"] is None or m["min_obstacle_clearance"] > sc.control.a
+
+
+@settings(max_examples=200, deadline=None)
+@given(v=st.floats(0.0, 6.0), accel=st.floats(0.5, 25.0), age=st.floats(0.0, 3.0),
+       later=st.floats(0.0, 3.0))
+def test_a_neighbour_s_disc_never_shrinks_as_its_data_ages(v, accel, age, later):
+    """Fresh, perhaps dead, silent: the full disc only grows with the data's age (it shrank
+    when the neighbour became silent, from its travel since the report to its braking)."""
+    def full(t):
+        return neighbour_hazard(v, 0.0, t, A, accel, TOP, STALE, SHARE, STOP)[0]
+    assert full(age + later) >= full(age) - 1e-12
+
+
+@settings(max_examples=100, deadline=None)
+@given(v=st.floats(0.0, 6.0), accel=st.floats(0.5, 25.0), died=st.floats(0.0, 1.0))
+def test_a_silent_neighbour_that_died_late_in_its_silence_stays_in_its_disc(v, accel, died):
+    """Reported moving straight at v, it drove on at up to its top speed until it died
+    ``died`` x the staleness limit after the report, then its drivers stopped it: its
+    centre ends inside the silent disc (less a)."""
+    v = min(v, TOP)
+    drive = died * STALE
+    top_at = max(TOP - v, 0.0) / accel                    # s to reach the top speed
+    t1 = min(drive, top_at)
+    path = v * t1 + 0.5 * accel * t1 * t1 + TOP * max(drive - top_at, 0.0)
+    speed = min(v + accel * drive, TOP)
+    path += stopping(speed, accel, STOP)
+    full, half = neighbour_hazard(v, 0.0, 10.0, A, accel, TOP, STALE, SHARE, STOP)
+    assert half == -math.inf and path <= full - A + 1e-9
