@@ -255,7 +255,9 @@ def test_ctrl_c_stops_the_cluster_and_a_rerun_resumes_without_rerunning(tmp_path
     """Interrupted (SIGINT) mid-way: exit 130 and no process left; a rerun runs only the
     runs without a row, and a campaign whose rows were partly deleted reruns exactly those
     and writes the same runs.parquet."""
-    spec = write_spec(tmp_path, TINY.replace("seeds = 2", "seeds = 4"))
+    # 30 s runs (about 0.3 s each): the campaign is still running when the signal comes
+    spec = write_spec(tmp_path, TINY.replace("seeds = 2", "seeds = 4")
+                      .replace("duration = 6.0", "duration = 30.0"))
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "hil.cli", "campaign", str(spec), "--out", str(out),
            "--workers", "1"]
