@@ -263,6 +263,7 @@ def test_ctrl_c_stops_the_cluster_and_a_rerun_resumes_without_rerunning(tmp_path
            "--workers", "1"]
     proc = subprocess.Popen(cmd, env=families, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
+    started: list[psutil.Process] = []
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and proc.poll() is None:
@@ -280,6 +281,11 @@ def test_ctrl_c_stops_the_cluster_and_a_rerun_resumes_without_rerunning(tmp_path
         assert not alive
     finally:
         stop([proc])
+        for c in started:               # orphaned when the campaign exited before the test
+            try:                        # could end it: they would load every later test
+                c.kill()
+            except psutil.NoSuchProcess:
+                pass
     before = rows_of(out)
     assert 2 <= len(before) < 24 and not (out / "runs.parquet").exists()
 
