@@ -261,8 +261,11 @@ def test_ctrl_c_stops_the_cluster_and_a_rerun_resumes_without_rerunning(tmp_path
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "hil.cli", "campaign", str(spec), "--out", str(out),
            "--workers", "1"]
+    # SIGINT at its default in the child, as from a shell: a child inherits an ignored
+    # SIGINT, and Python then leaves it ignored (seen inside the full suite)
     proc = subprocess.Popen(cmd, env=families, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+                            stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     started: list[psutil.Process] = []
     try:
         deadline = time.monotonic() + 120
