@@ -224,7 +224,8 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
 
     # TRACK: pass the nearest neighbour in the way on its right, b + hysteresis off
     if mode == TRACK and p.sidestep:
-        passing, nearest, heading = p.b + p.hysteresis, min(p.c, D), theta_d
+        passing, within = p.b + p.hysteresis, min(p.c, D)
+        nearest, heading = within, theta_d
         for j in range(n_nbr):
             dx, dy = nbr_x[j] - x, nbr_y[j] - y
             d = math.sqrt(dx * dx + dy * dy)
@@ -233,7 +234,7 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
                 cone = HALF_PI if d <= passing else math.asin(passing / d)
                 if abs(wrap_angle(theta_d - phi)) < cone:
                     nearest, heading = d, phi - cone
-        if nearest < min(p.c, D):
+        if nearest < within:
             theta_d, ff = heading, 0.0
 
     e_theta = 0.0 if dist < EPS else wrap_angle(theta - theta_d)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -65,8 +66,6 @@ def run(args: argparse.Namespace, console: Console) -> int:
         raise BadInput(f"--seed: expected an integer >= 0, got {args.seed}")
     robot = None
     if args.robot:
-        import dataclasses
-
         from hil.robot_profile import load_robot_profile
         robot = load_robot_profile(args.robot)
     if args.family is not None:
