@@ -49,6 +49,13 @@ class ControlParams:
                              "the reference is passed on its right, b + hysteresis off "
                              "(false: the paper's TRACK, which drives at it and waits for "
                              "AVOID or the governor)")
+    pair_hysteresis: bool = setting(False, doc="AVOID's hysteresis per pair: a neighbour "
+                                    "stays avoided until it is farther than b + hysteresis "
+                                    "(false: per robot, every neighbour within b + "
+                                    "hysteresis while the robot avoids any)")
+    law: str = setting("boundswarm", choices=("boundswarm", "paper"),
+                       doc="boundswarm: with the deadlock resolution (sidestep, per-pair "
+                       "hysteresis, as set); paper: the paper's law with its fixes, both off")
 
     def __post_init__(self) -> None:
         validate(self)

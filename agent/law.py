@@ -3,9 +3,11 @@ law, written once (docs/controller.md is its specification).
 
 Every period the robot picks one of three modes:
 
-* AVOID (Theorem 2) when a neighbour is closer than b (closer than b + hysteresis while it
-  is already avoiding one) or an obstacle surface is closer than b. The robot descends the
-  potential sum V = K_ij ln cosh(r - c) of those neighbours and obstacle virtual agents, with
+* AVOID (Theorem 2) when a pair with a neighbour is active or an obstacle surface is closer
+  than b. A pair becomes active closer than b and stays active until it is farther than b +
+  hysteresis (:func:`pair_active`; per pair, or with ``pair_hysteresis`` off per robot: every
+  neighbour within b + hysteresis while the robot avoided one). The robot descends the
+  potential sum V = K_ij ln cosh(r - c) of the active neighbours and obstacle virtual agents, with
   any component toward a neighbour or obstacle closer than b removed:
   theta_d = atan2(-g), u = -K_theta e_theta, v = K cos(e_theta) min(D_max, |g|).
 * ROTATE when not avoiding and an obstacle within c blocks the straight path to the
@@ -78,18 +80,30 @@ class LawParams(NamedTuple):
     watchdog: float     # s the drivers go on with the last command should the agent die
     governor: bool      # the safety governor acts
     sidestep: bool      # TRACK passes a neighbour in the way on its right
+    pair_hysteresis: bool   # AVOID's hysteresis per pair (else per robot)
 
     @classmethod
     def of(cls, control: ControlParams, robot: RobotParams | None) -> "LawParams":
         """The law's view of the controller and of the robot (None: an ideal robot, whose
-        wheels follow any command at once)."""
+        wheels follow any command at once). ``law = "paper"`` turns the deadlock resolution
+        off (sidestep and per-pair hysteresis)."""
         inf = math.inf
         limits = ((robot.a_max, robot.drive_latency, robot.wheel_radius, robot.wheel_base,
                    robot.wheel_speed_limit, robot.wheel_ramp, drivers.WATCHDOG)
                   if robot is not None else (inf, 0.0, 1.0, 1.0, inf, inf, 0.0))
+        resolve = control.law != "paper"
         return cls(control.K, control.K_theta, control.D_max, control.K_ij, control.b,
                    control.c, control.u_max, control.hysteresis, *limits, control.governor,
-                   control.sidestep)
+                   control.sidestep and resolve, control.pair_hysteresis and resolve)
+
+
+def pair_active(d2: float, held: bool, b: float, hysteresis: float) -> bool:
+    """Whether the pair with a neighbour at squared distance ``d2`` [m^2] is active (the
+    neighbour is avoided): closer than ``b`` [m], or closer than b + ``hysteresis`` [m] while
+    it was active in the last period (``held``). The caller keeps ``held`` per neighbour,
+    from this very function, for :func:`law_step`'s ``nbr_held``."""
+    reach = b + hysteresis if held else b
+    return d2 < reach * reach
 
 
 class LawMemory(NamedTuple):
@@ -108,7 +122,8 @@ class LawMemory(NamedTuple):
 
 
 def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_vx: float,
-             ref_vy: float, nbr_x: FloatSeq, nbr_y: FloatSeq, obs_x: FloatSeq, obs_y: FloatSeq,
+             ref_vy: float, nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_held: FloatSeq,
+             obs_x: FloatSeq, obs_y: FloatSeq,
              obs_r: FloatSeq, haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq,
              haz_half: FloatSeq, haz_moving: FloatSeq, mem: LawMemory, p: LawParams,
              dt: float) -> tuple[float, float, int, float, LawMemory]:
@@ -117,7 +132,9 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
 
     (x, y, theta) is the robot's pose, (ref_x, ref_y) its reference p_d(t) and (ref_vx,
     ref_vy) [m/s] the reference's velocity p_d_dot(t); ``nbr_x``,
-    ``nbr_y`` the neighbours in range (extrapolated to now); ``obs_x``, ``obs_y``, ``obs_r``
+    ``nbr_y`` the neighbours in range (extrapolated to now) and ``nbr_held`` 1.0 for each
+    whose pair was active in the last period (:func:`pair_active`), else 0.0; ``obs_x``,
+    ``obs_y``, ``obs_r``
     the obstacles in range (centre and radius); ``haz_*`` the governor's hazards (centre,
     exclusion radii [m] of the whole and of the half free distance, moving or not:
     :mod:`agent.governor`); ``dt`` [s]
@@ -135,11 +152,11 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
 
     # AVOID decision, with hysteresis on the neighbour part
     n_nbr, n_obs = len(nbr_x), len(obs_r)
-    reach = p.b + p.hysteresis if mem.avoiding else p.b
     avoiding = False
     for j in range(n_nbr):
         dx, dy = nbr_x[j] - x, nbr_y[j] - y
-        if dx * dx + dy * dy < reach * reach:
+        held = nbr_held[j] > 0.5 if p.pair_hysteresis else mem.avoiding
+        if pair_active(dx * dx + dy * dy, held, p.b, p.hysteresis):
             avoiding = True
     obs_near = False
     for k in range(n_obs):
@@ -190,7 +207,8 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         for j in range(n_nbr):
             dx, dy = nbr_x[j] - x, nbr_y[j] - y
             d2 = dx * dx + dy * dy
-            if d2 < reach * reach:
+            held = nbr_held[j] > 0.5 if p.pair_hysteresis else mem.avoiding
+            if pair_active(d2, held, p.b, p.hysteresis):
                 d = math.sqrt(d2)
                 w = p.K_ij * math.tanh(d - p.c)
                 if d >= EPS:

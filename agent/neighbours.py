@@ -24,6 +24,8 @@ class NeighbourState(Protocol):
     messages are frozen dataclasses."""
 
     @property
+    def robot_id(self) -> int: ...
+    @property
     def stamp(self) -> float: ...       # s, UNIX time
     @property
     def x(self) -> float: ...           # m
@@ -43,8 +45,10 @@ class InRange:
 
     fresh_x: list[float] = field(default_factory=list)  # extrapolated to now
     fresh_y: list[float] = field(default_factory=list)
+    fresh_id: list[int] = field(default_factory=list)   # their robot ids
     stale_x: list[float] = field(default_factory=list)  # at their last position
     stale_y: list[float] = field(default_factory=list)
+    stale_id: list[int] = field(default_factory=list)   # their robot ids
     ages: list[float] = field(default_factory=list)  # s, now - stamp of each fresh one
 
 
@@ -77,8 +81,10 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
             if stale:
                 out.stale_x.append(px)
                 out.stale_y.append(py)
+                out.stale_id.append(m.robot_id)
             else:
                 out.fresh_x.append(px)
                 out.fresh_y.append(py)
+                out.fresh_id.append(m.robot_id)
                 out.ages.append(age)
     return out

@@ -30,10 +30,11 @@ from agent.config import CONTROL_PARAMS
 from agent.formation import Formation
 from agent.governor import neighbour_hazard
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
-from agent.law import LawMemory, LawParams, law_step
+from agent.law import LawMemory, LawParams, law_step, pair_active
 from agent.loop import Clock
 from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry
+from agent.progress import PROGRESS, ProgressWatch, tolerance
 from common import drivers
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import MotorPort, SwarmPort
@@ -59,6 +60,8 @@ class AgentCounters:
     law_steps: int = 0
     governed: int = 0                    # law steps in which the governor lowered the speed
     governor_min_allowed: float = math.inf   # m/s
+    deadlocks: int = 0                   # times the robot became deadlocked
+    deadlocked_periods: int = 0          # law steps while deadlocked
 
     def summary(self) -> dict:
         ages = np.asarray(self.neighbour_age) * 1e3
@@ -67,6 +70,9 @@ class AgentCounters:
                 "governor_share": self.governed / self.law_steps if self.law_steps else 0.0,
                 "governor_min_allowed": (self.governor_min_allowed
                                          if math.isfinite(self.governor_min_allowed) else None),
+                "deadlocks": self.deadlocks,
+                "deadlocked_share": (self.deadlocked_periods / self.law_steps
+                                     if self.law_steps else 0.0),
                 "neighbour_age_ms": {
                     "p50": float(np.percentile(ages, 50)) if ages.size else None,
                     "p99": float(np.percentile(ages, 99)) if ages.size else None,
@@ -86,6 +92,9 @@ class Agent:
         self.odometry = Odometry(settings.robot.wheel_radius, settings.robot.wheel_base,
                                  settings.initial_pose)
         self.memory = LawMemory()
+        self._held: set[int] = set()       # neighbours whose pair was active (law.pair_active)
+        self.progress = ProgressWatch(settings.timeouts.deadlock)
+        self.deadlock: str | None = None   # why the robot is deadlocked, if it is
         self.counters = AgentCounters()
         self.last_feedback: WheelFeedback | None = None
         self.command = (0.0, 0.0)          # (v [m/s], u [rad/s]) after saturation
@@ -182,8 +191,11 @@ class Agent:
             if self.mode is AgentMode.FORMATION and self.failsafe is None and not self._arming:
                 v, u = self._formation_step(pose, mission, neighbours, detections, now_m,
                                             now_w)
+            else:
+                self._watch_progress(None)
         else:
             self._last_law = None
+            self._watch_progress(None)
 
         # write (the law's command is within the wheels' limit and ramp already: wheel_command
         # only converts it; a HOLD's zero is ramped by the drivers)
@@ -255,9 +267,11 @@ class Agent:
                         ) -> tuple[float, float]:
         if mission is None or now_w < mission.epoch:
             self._last_law = None
+            self._watch_progress(None)
             return 0.0, 0.0
         formation = self._formation_place(mission)
         if formation is None:
+            self._watch_progress(None)
             return 0.0, 0.0
         rx, ry, rvx, rvy = formation.point(0, now_w - mission.epoch)
         self.reference = (rx, ry)
@@ -266,9 +280,18 @@ class Agent:
                                 now_w)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
+        held = [1.0 if rid in self._held else 0.0 for rid in near.fresh_id]
         v, u, mode, governed, self.memory = law_step(
-            *pose, rx, ry, rvx, rvy, near.fresh_x, near.fresh_y, obs_x, obs_y, obs_r,
+            *pose, rx, ry, rvx, rvy, near.fresh_x, near.fresh_y, held, obs_x, obs_y, obs_r,
             *hazards, self.memory, self._law_params, max(dt, 1e-6))
+        self._held = set()
+        for rid, nx, ny, h in zip(near.fresh_id, near.fresh_x, near.fresh_y, held):
+            dx, dy = nx - pose[0], ny - pose[1]
+            if pair_active(dx * dx + dy * dy, h > 0.5, self.s.control.b,
+                           self.s.control.hysteresis):
+                self._held.add(rid)
+        self._watch_progress((now_m, math.hypot(pose[0] - rx, pose[1] - ry),
+                              tolerance(math.hypot(rvx, rvy), self.s.control.K)))
         self.law_mode = Mode(mode)
         self.counters.law_steps += 1
         self.governed = math.isfinite(governed)
@@ -278,6 +301,29 @@ class Agent:
                                                      governed)
         return v, u
 
+    def _watch_progress(self, sample: tuple[float, float, float] | None) -> None:
+        """The deadlock detector (agent.progress) on (monotonic time [s], tracking error [m],
+        tolerance [m]) of a period that followed the reference; None: the robot did not
+        follow it (the detector starts again)."""
+        if sample is None:
+            self.progress.reset()
+            self.deadlock = None
+            return
+        t, error, tol = sample
+        if self.progress.update(t, error, tol):
+            self.counters.deadlocked_periods += 1
+            if self.deadlock is None:
+                self.counters.deadlocks += 1
+                log.warning("robot %d deadlocked: %.1f m from its place, less than %.1f m "
+                            "closer in %g s", self.s.robot_id, error, PROGRESS,
+                            self.progress.window)
+            self.deadlock = (f"{error:.1f} m off, <{PROGRESS:g} m closer in "
+                             f"{self.progress.window:g} s")
+        else:
+            if self.deadlock is not None:
+                log.info("robot %d progressing again", self.s.robot_id)
+            self.deadlock = None
+
     def _hazards(self, pose: tuple[float, float, float],
                  neighbours: Mapping[int, Received[StateMsg]], obs_x: list[float],
                  obs_y: list[float], obs_r: list[float], n_stale: int, now_w: float
@@ -286,9 +332,8 @@ class Agent:
         heard from at its reported position, grown by its data's age, and the detected
         obstacles grown by a (``obs_*`` without their last ``n_stale`` entries: stale
         robots, which are among the neighbours)."""
-        s, r = self.s, self.s.robot
-        top = min(s.control.v_max, r.v_wheel_max)
-        stop_time = drivers.WATCHDOG + r.drive_latency
+        s = self.s
+        top = min(s.control.v_max, s.robot.v_wheel_max)
         hx: list[float] = []
         hy: list[float] = []
         hr: list[float] = []
@@ -300,9 +345,7 @@ class Agent:
             if rid == s.robot_id or math.hypot(m.x - pose[0], m.y - pose[1]) > reach:
                 continue
             age = now_w - m.stamp
-            full, half = neighbour_hazard(m.v, 0.5 * m.u * r.wheel_base, age, s.control.a,
-                                          r.a_max, top, s.timeouts.staleness,
-                                          s.control.share_age, stop_time)
+            full, half = self._disc(m, age)
             hx.append(m.x)
             hy.append(m.y)
             hr.append(full)
@@ -316,13 +359,21 @@ class Agent:
             hm.append(0.0)
         return hx, hy, hr, hh, hm
 
+    def _disc(self, m: StateMsg, age: float) -> tuple[float, float]:
+        """The governor's exclusion radii [m] (full, half) around neighbour state ``m``
+        of age ``age`` [s] (agent.governor.neighbour_hazard)."""
+        s, r = self.s, self.s.robot
+        return neighbour_hazard(m.v, 0.5 * m.u * r.wheel_base, age, s.control.a, r.a_max,
+                                min(s.control.v_max, r.v_wheel_max), s.timeouts.staleness,
+                                s.control.share_age, drivers.WATCHDOG + r.drive_latency)
+
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],
                       obs: ObstaclesMsg | None, now_w: float
                       ) -> tuple[InRange, list[float], list[float], list[float]]:
         """Neighbours in range [m] (extrapolated to now) and obstacles' centres and radii
-        [m] (the detections ``obs``), stale robots included as static obstacles of radius
-        a/2 at their last position."""
+        [m] (the detections ``obs``), stale robots included as static obstacles at their
+        last position: the governor's disc of a silent robot less a, at least a/2."""
         me = self.s.robot_id
         near = in_range((r.msg for rid, r in neighbours.items() if rid != me),
                         pose[0], pose[1], now_w, self.s.timeouts.staleness, self.s.sensing_range)
@@ -331,7 +382,10 @@ class Agent:
                                 obs.radii.tolist()) if obs is not None else ([], [], []))
         obs_x += near.stale_x
         obs_y += near.stale_y
-        obs_r += [self.s.control.a / 2] * len(near.stale_x)
+        a = self.s.control.a
+        for rid in near.stale_id:
+            m = neighbours[rid].msg
+            obs_r.append(max(a / 2, self._disc(m, now_w - m.stamp)[0] - a))
         return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:
@@ -344,6 +398,8 @@ class Agent:
             f |= StateFlags.FAILSAFE
         if self.governed:
             f |= StateFlags.GOVERNED
+        if self.deadlock:
+            f |= StateFlags.DEADLOCKED
         return f
 
     def _publish(self, pose: tuple[float, float, float], now_w: float) -> None:

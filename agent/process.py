@@ -46,7 +46,7 @@ class AgentVehicle:
     def state(self) -> VehicleState:
         a = self.agent
         x, y, theta = a.odometry.pose
-        return VehicleState(a.mode, a.failsafe, x, y, theta, *a.command)
+        return VehicleState(a.mode, a.failsafe, x, y, theta, *a.command, a.deadlock)
 
     def arm(self) -> str | None:
         self.agent.arm()

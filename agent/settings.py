@@ -32,6 +32,7 @@ from pathlib import Path
 
 from agent.config import ControlParams, RobotParams
 from agent.impairment import ImpairmentSettings
+from agent.progress import WINDOW
 from common.schema import ConfigError, from_table, load_toml, section, setting, validate
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 
@@ -46,6 +47,9 @@ class TimeoutSettings:
                                "obstacle at its last position", lo=0.0, open_lo=True)
     arm: float = setting(5.0, unit="s", doc="for both drivers to enter closed loop after "
                          "arming", lo=0.0, open_lo=True)
+    deadlock: float = setting(WINDOW, unit="s", doc="out of tolerance and less than 0.5 m "
+                              "closer to the reference over this long: deadlocked (reported, "
+                              "STATUSTEXT WARNING)", lo=0.0, open_lo=True)
 
     def __post_init__(self) -> None:
         validate(self)

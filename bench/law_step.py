@@ -18,7 +18,7 @@ from agent.config import ControlParams, RobotParams
 from agent.law import LawMemory, LawParams, law_step
 
 POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0, 2.0, 0.0)   # m, rad; reference m and m/s
-NBR_X, NBR_Y = [2.0, 3.0, -1.0], [1.0, -2.0, 4.0]
+NBR_X, NBR_Y, NBR_H = [2.0, 3.0, -1.0], [1.0, -2.0, 4.0], [1.0, 0.0, 0.0]
 OBS_X, OBS_Y, OBS_R = [6.0], [0.0], [1.0]
 
 
@@ -30,8 +30,8 @@ HAZ_M = [1.0] * len(NBR_X) + [0.0] * len(OBS_R)
 
 def law(p: ControlParams):
     lp = LawParams.of(p, RobotParams())
-    return LawMemory(), lambda mem: law_step(*POSE, *REF, NBR_X, NBR_Y, OBS_X, OBS_Y, OBS_R,
-                                             HAZ_X, HAZ_Y, HAZ_R, HAZ_S, HAZ_M, mem, lp,
+    return LawMemory(), lambda mem: law_step(*POSE, *REF, NBR_X, NBR_Y, NBR_H, OBS_X, OBS_Y,
+                                             OBS_R, HAZ_X, HAZ_Y, HAZ_R, HAZ_S, HAZ_M, mem, lp,
                                              p.period)[4]
 
 

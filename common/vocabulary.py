@@ -29,6 +29,7 @@ class StateFlags(enum.IntFlag):
     HOLD = 2          # commanded to stand still
     FAILSAFE = 4      # a timeout or fault put the agent in its safe state
     GOVERNED = 8      # the safety governor lowered the speed this period
+    DEADLOCKED = 16   # no progress toward the reference (agent.progress)
 
 
 @dataclass(frozen=True)

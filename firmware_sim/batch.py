@@ -25,10 +25,11 @@ import numpy as np
 from agent.config import ControlParams, RobotParams
 from agent.formation import Formation
 from agent.law import LawParams
+from agent.progress import TOLERANCE_MARGIN
 from agent.settings import TimeoutSettings
 from common import drivers
 from firmware_sim import compiled, swarm_step, world_step
-from firmware_sim.metrics import TOLERANCE_MARGIN, RunMetrics
+from firmware_sim.metrics import RunMetrics
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles, WorldParams
 
@@ -153,6 +154,8 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
 
     mem_f, mem_i = np.zeros((n, 7)), np.zeros((n, 3), np.int64)
     new_f, new_i = np.zeros((n, 7)), np.zeros((n, 3), np.int64)
+    cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
+    held, new_held = np.full((n, cap + 1), -1, np.int64), np.full((n, cap + 1), -1, np.int64)
     cmd, ref, near = np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 2))
     last_mode, err, within = np.zeros(n), np.zeros(n), np.zeros(n, bool)
     # wheels plant: drive latency in whole substeps; the commands of the last substeps, at
@@ -162,7 +165,6 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     wheels, enc = np.zeros((n, 2)), np.zeros((n, 2))
     pos = np.zeros((S + 1, n, 2))
     dmin, cmin, who = np.zeros(S + 1), np.zeros(S + 1), np.zeros((S + 1, 4), np.int64)
-    cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
     watch_j, watch_k = np.empty((n, watch_cap), np.int64), np.empty((n, watch_cap), np.int64)
     hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
     w = _WorldState(world, n, ids, pose, T, control, robot, ideal, k)
@@ -174,12 +176,17 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             metrics.max_pose_error = max(metrics.max_pose_error, float(
                 np.hypot(own[:, 0] - pose[:, 0], own[:, 1] - pose[:, 1]).max(initial=0.0)))
         while True:
-            need, need_watch = k.control(pose, own, seen, view, mem_f, mem_i, offsets, motion, t,
-                                         obs, params, T, options.sensing_range, control.a,
-                                         reach, cap, watch_cap, world_i, w.world_f, cmd, ref,
-                                         new_f, new_i, near, watch_j, watch_k)
+            need, need_watch = k.control(pose, own, seen, view, mem_f, mem_i, held, offsets,
+                                         motion, t, obs, params, T, options.sensing_range,
+                                         control.a, reach, cap, watch_cap, world_i, w.world_f,
+                                         cmd, ref, new_f, new_i, new_held, near, watch_j,
+                                         watch_k)
             if need <= cap and need_watch <= watch_cap:
                 break
+            if need > cap:
+                grown = np.full((n, int(need) + 1), -1, np.int64)
+                grown[:, :cap + 1] = held
+                held, new_held = grown, np.full((n, int(need) + 1), -1, np.int64)
             cap, watch_cap = max(cap, int(need)), max(watch_cap, int(need_watch))
             watch_j = np.empty((n, watch_cap), np.int64)
             watch_k = np.empty((n, watch_cap), np.int64)
@@ -187,6 +194,7 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         if clock:
             law_seconds += clock() - t0
         mem_f, new_f, mem_i, new_i = new_f, mem_f, new_i, mem_i
+        held, new_held = new_held, held
         w.after_control(step, t, own, cmd)
         v, u, mode = cmd[:, 0], cmd[:, 1], cmd[:, 2]       # views, overwritten next period
         max_v, max_u, switches, all_within = k.period_summary(

@@ -7,7 +7,8 @@ SITL alike): :meth:`RunMetrics.observe_geometry` at every physics (sub)step,
 :meth:`RunMetrics.summary` gives the ``metrics.json`` dictionary (its keys are listed in
 docs/formats.md).
 
-Convergence tolerance per robot: |p_d_dot| / K + 0.25 m. The law's only feed-forward is the
+Convergence tolerance per robot: |p_d_dot| / K + 0.25 m, and the deadlock rule, as the
+agents' detector has them (:mod:`agent.progress`). The law's only feed-forward is the
 heading rate in TRACK; v has none of the reference velocity, so in steady state a robot
 trails its reference by |p_d_dot| / K (docs/controller.md).
 """
@@ -18,9 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-TOLERANCE_MARGIN = 0.25  # m, added to the steady-state lag |p_d_dot| / K
-DEADLOCK_WINDOW = 10.0   # s without progress that makes a run deadlocked
-DEADLOCK_PROGRESS = 0.5  # m of tracking error a robot must shed in that window
+from agent.progress import PROGRESS, WINDOW
 
 
 @dataclass
@@ -114,7 +113,7 @@ class RunMetrics:
         self._final_err, self._final_within = error, within
         if not self._errors or t >= self._errors[-1][0] + 1.0:
             self._errors.append((t, error.copy()))
-            while self._errors[0][0] < t - DEADLOCK_WINDOW - 1.0:
+            while self._errors[0][0] < t - WINDOW - 1.0:
                 self._errors.pop(0)
 
     def observe_governor(self, limit: np.ndarray, alive: np.ndarray) -> None:
@@ -143,15 +142,15 @@ class RunMetrics:
     @property
     def deadlocked(self) -> list[int]:
         """The robots (ids) outside their tolerance at the end that shed less than
-        DEADLOCK_PROGRESS of tracking error over the last DEADLOCK_WINDOW seconds: stuck,
+        PROGRESS of tracking error over the last WINDOW seconds: stuck,
         or trailing their place at its own speed."""
         if self._final_within is None or not self._errors:
             return []
         t_end = self._errors[-1][0]
-        then = [e for t, e in self._errors if t <= t_end - DEADLOCK_WINDOW]
+        then = [e for t, e in self._errors if t <= t_end - WINDOW]
         if not then:
             return []
-        stuck = ~self._final_within & (self._errors[-1][1] > then[-1] - DEADLOCK_PROGRESS)
+        stuck = ~self._final_within & (self._errors[-1][1] > then[-1] - PROGRESS)
         return [int(i) for i in self.ids[stuck]]
 
     @property

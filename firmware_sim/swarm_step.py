@@ -19,7 +19,7 @@ import numpy as np
 from agent.formation import reference_point
 from agent.governor import neighbour_hazard
 from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
-from agent.law import LawMemory, LawParams, law_step
+from agent.law import LawMemory, LawParams, law_step, pair_active
 from firmware_sim.world_step import FRESH, NONE, STALE, detect
 
 prange = range   # numba.prange when compiled
@@ -152,7 +152,8 @@ def _watch(i: int, x: float, y: float, m: int, k: int, nbr_d: np.ndarray,
 
 
 def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np.ndarray,
-                   view: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray,
+                   view: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, held: np.ndarray,
+                   offsets: np.ndarray,
                    motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams,
                    period: float, sensing_range: float, a: float, reach: float, cap: int,
                    watch_cap: int, world_i: np.ndarray, world_f: np.ndarray,
@@ -160,7 +161,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                    grid: Grid, obs_grid: Grid, outs: tuple[np.ndarray, ...]
                    ) -> tuple[int, int]:
     """:func:`control` for robots lo..hi - 1: returns (capacity, watch capacity) needed."""
-    out_cmd, out_ref, out_mem_f, out_mem_i, out_near, watch_j, watch_k = outs
+    out_cmd, out_ref, out_mem_f, out_mem_i, out_held, out_near, watch_j, watch_k = outs
     truth, seed, step = world_i[0] != 0, world_i[1], world_i[2]
     det_noise, det_dropout, stale_radius = world_f[0], world_f[1], world_f[2]
     staleness, share_age, stop_time, top_speed = world_f[3], world_f[4], world_f[5], world_f[6]
@@ -168,6 +169,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     max_r = obs[:, 2].max() if len(obs) else 0.0
     nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
     nbr_j = np.empty(cap, np.int64)
+    nbr_h = np.empty(cap)
     o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
     o_k = np.empty(cap, np.int64)
     h_x, h_y, h_r = np.empty(2 * cap), np.empty(2 * cap), np.empty(2 * cap)
@@ -207,11 +209,17 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             for q in range(m):
                 status = seen[nbr_j[q], 2]
                 if status == STALE:
+                    # the governor's silent disc, less a (the law keeps b from its surface)
+                    j = nbr_j[q]
+                    full, _ = neighbour_hazard(view[j, 3], 0.5 * view[j, 4] * p.wheel_base,
+                                               t - view[j, 5], a, p.accel, top_speed,
+                                               staleness, share_age, stop_time)
                     if k < cap:
-                        o_x[k], o_y[k], o_r[k], o_k[k] = nbr_x[q], nbr_y[q], stale_radius, -1
+                        o_x[k], o_y[k], o_k[k] = nbr_x[q], nbr_y[q], -1
+                        o_r[k] = max(stale_radius, full - a)
                     k += 1
                 elif status == FRESH:
-                    nbr_x[fresh], nbr_y[fresh] = nbr_x[q], nbr_y[q]
+                    nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]
                     fresh += 1
             m = fresh
             need = max(need, k)
@@ -222,10 +230,18 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
                         mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4], mem_f[i, 5],
                         mem_f[i, 6])
+        # the pairs active last period (per-pair hysteresis); held lists are short
+        for q in range(m):
+            nbr_h[q] = 0.0
+            for w in range(held.shape[1]):
+                if held[i, w] < 0:
+                    break
+                if held[i, w] == nbr_j[q]:
+                    nbr_h[q] = 1.0
         v, u, mode, allowed, new = law_step(x, y, own[i, 2], rx, ry, rvx, rvy, nbr_x[:m],
-                                            nbr_y[:m], o_x[:k], o_y[:k], o_r[:k], h_x[:n_h],
-                                            h_y[:n_h], h_r[:n_h], h_h[:n_h], h_m[:n_h], mem, p,
-                                            period)
+                                            nbr_y[:m], nbr_h[:m], o_x[:k], o_y[:k], o_r[:k],
+                                            h_x[:n_h], h_y[:n_h], h_r[:n_h], h_h[:n_h],
+                                            h_m[:n_h], mem, p, period)
         out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2], out_cmd[i, 3] = v, u, mode, allowed
         out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
         out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey
@@ -234,6 +250,13 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         out_mem_f[i, 5], out_mem_f[i, 6] = new.wheel_r, new.wheel_l
         out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
                                                              int(new.avoiding), new.side)
+        w = 0
+        for q in range(m):
+            dx, dy = nbr_x[q] - x, nbr_y[q] - y
+            if pair_active(dx * dx + dy * dy, nbr_h[q] > 0.5, p.b, p.hysteresis):
+                out_held[i, w] = nbr_j[q]
+                w += 1
+        out_held[i, w] = -1
         # what to watch during the period: around the truth
         if not truth:
             x, y = pose[i, 0], pose[i, 1]
@@ -258,12 +281,13 @@ def _sorted(pos: np.ndarray, grid: Grid) -> np.ndarray:
 
 
 def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarray,
-            mem_f: np.ndarray, mem_i: np.ndarray, offsets: np.ndarray, motion: np.ndarray,
+            mem_f: np.ndarray, mem_i: np.ndarray, held: np.ndarray, offsets: np.ndarray,
+            motion: np.ndarray,
             t: float, obs: np.ndarray, p: LawParams, period: float, sensing_range: float, a: float,
             reach: float, cap: int, watch_cap: int, world_i: np.ndarray,
             world_f: np.ndarray, out_cmd: np.ndarray, out_ref: np.ndarray,
-            out_mem_f: np.ndarray, out_mem_i: np.ndarray, out_near: np.ndarray,
-            watch_j: np.ndarray, watch_k: np.ndarray) -> tuple[int, int]:
+            out_mem_f: np.ndarray, out_mem_i: np.ndarray, out_held: np.ndarray,
+            out_near: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray) -> tuple[int, int]:
     """Sense and run the law for every robot.
 
     pose (N, 3) [m, m, rad] the truth; own (N, 3) the pose each robot believes it has;
@@ -275,11 +299,14 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
     obstacle, staleness [s], sharing age [s], stop time of a dead agent [s], top speed
     [m/s]) (:func:`agent.governor.neighbour_hazard`). Memory of :class:`LawMemory` as
     floats (N, 7): prev_ex, prev_ey, center_x, center_y, radius, wheel_r, wheel_l, and
-    ints (N, 3): has_prev, avoiding, side; offsets (N, 2) [m] and motion (5,) = centre0 x,
+    ints (N, 3): has_prev, avoiding, side; held (N, cap + 1) the indices of the robots
+    each robot's pairs with which were active (:func:`agent.law.pair_active`), -1 ending
+    the list; offsets (N, 2) [m] and motion (5,) = centre0 x,
     y [m], velocity x, y [m/s], omega [rad/s] of the formation; obs (K, 3) = obstacle
     centre x, y and radius [m].
     Out: out_cmd (N, 4) = v [m/s], u [rad/s], mode, the speed the governor allowed when it
-    acted [m/s] (inf: it did not); out_ref (N, 4) = p_d, p_d_dot; the new memory;
+    acted [m/s] (inf: it did not); out_ref (N, 4) = p_d, p_d_dot; the new memory and held
+    lists;
     out_near (N, 2) [m]: the true distance to the nearest neighbour and the smallest
     clearance to an obstacle in range (inf: none); the watch lists, on the truth:
     watch_j (N, watch_cap) the robots j > i whose distance is within
@@ -301,13 +328,13 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
     obs_grid = build_grid(obs[:, 0], obs[:, 1], sensing_range + max_r, 4 * max(n, k_obs) + 64)
     chunks = min(n, 64)
     need = np.zeros((chunks, 2), np.int64)
-    outs = (out_cmd, out_ref, out_mem_f, out_mem_i, out_near, watch_j, watch_k)
+    outs = (out_cmd, out_ref, out_mem_f, out_mem_i, out_held, out_near, watch_j, watch_k)
     for chunk in prange(chunks):
         # the robots of a chunk in a plain function: numba optimises it better than the
         # body of a parallel loop
         need[chunk, 0], need[chunk, 1] = _control_range(
             chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, view, mem_f, mem_i,
-            offsets, motion, t, obs, p, period, sensing_range, a, reach, cap, watch_cap,
+            held, offsets, motion, t, obs, p, period, sensing_range, a, reach, cap, watch_cap,
             world_i, world_f, sorted_seen, seen_grid, sorted_xy, grid, obs_grid, outs)
     return (need[:, 0].max(), need[:, 1].max()) if chunks else (0, 0)
 

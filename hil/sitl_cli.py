@@ -162,6 +162,8 @@ def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> d
         "neighbour_age_ms": {r: st["agent"]["neighbour_age_ms"]
                              for r, st in run.agent_stats.items()},
         "failsafes": {r: st["failsafe"] for r, st in run.agent_stats.items() if st["failsafe"]},
+        "agent_deadlocks": {r: st["agent"]["deadlocks"] for r, st in run.agent_stats.items()
+                            if st["agent"]["deadlocks"]},
         "can": {r: st["can"] for r, st in run.agent_stats.items()},
         "zenoh_dropped": {r: {**st["zenoh"]["states"]["dropped"],
                               **{f"beacon_{k}": v for k, v in

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_sim.metrics import TOLERANCE_MARGIN, RunMetrics
+from agent.progress import TOLERANCE_MARGIN
+from firmware_sim.metrics import RunMetrics
 from firmware_sim.swarm_step import period_summary
 from firmware_sim.world import Obstacles
 from hil.recorder import read_messages

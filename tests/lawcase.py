@@ -24,6 +24,8 @@ class Case(NamedTuple):
     nbrs: list[tuple[float, float]]
     obstacles: list[tuple[float, float, float]]
     hazards: list[tuple[float, float, float, float, float]] = []  # x, y, full, half, moving
+    held: list[float] | None = None   # per neighbour, pair active last period (None: all
+    #                                   as the memory's avoiding flag)
 
 
 class Output(NamedTuple):
@@ -46,7 +48,9 @@ def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None 
          robot: RobotParams | None = None) -> Output:
     """One law step; ``robot`` None: the ideal robot (no wheel limits, infinite braking)."""
     params = params or ControlParams()
-    columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs],
+    mem = mem or LawMemory()
+    held = case.held if case.held is not None else [float(mem.avoiding)] * len(case.nbrs)
+    columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs], held,
                [o[0] for o in case.obstacles], [o[1] for o in case.obstacles],
                [o[2] for o in case.obstacles], [h[0] for h in case.hazards],
                [h[1] for h in case.hazards], [h[2] for h in case.hazards],
@@ -56,6 +60,6 @@ def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None 
         law = compiled.kernels().law_step
         columns = tuple(np.array(c, dtype=float) for c in columns)
     v, u, mode, governed, memory = law(*case.pose, *case.ref, 0.0, 0.0, *columns,
-                                       mem or LawMemory(), LawParams.of(params, robot),
+                                       mem, LawParams.of(params, robot),
                                        params.period)
     return Output([v], [u], [mode], memory, governed)

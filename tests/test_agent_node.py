@@ -5,6 +5,7 @@ from fakes import MirrorMotor, SharedSwarm
 from helpers import SimClock
 
 from agent.config import ControlParams, RobotParams
+from agent.governor import neighbour_hazard
 from agent.loop import FixedRateLoop
 from agent.node import Agent
 from agent.settings import AgentSettings
@@ -63,6 +64,29 @@ def test_agents_swap_through_each_other_without_collision():
     assert Mode.AVOID in modes
 
 
+def test_agents_keep_the_pair_hysteresis_by_neighbour_id():
+    """Hysteresis per pair: a neighbour that came within b stays avoided out to b +
+    hysteresis, remembered by its id; released beyond, it is not avoided again at the same
+    distance until it comes within b."""
+    import dataclasses
+    clock, net, (a, b) = make_swarm([(0.0, 0.0, 0.0), (1.8, 0.0, 0.0)],
+                                    [(0.0, 20.0), (1.8, 0.0)])
+    a = Agent(dataclasses.replace(a.s, control=ControlParams(pair_hysteresis=True)),
+              MirrorMotor(clock), a.swarm, clock)
+    a.arm()
+    a.set_mode(AgentMode.FORMATION)
+    p = a.s.control
+    seen = []
+    for x in (1.8, p.b + 0.3, p.b + p.hysteresis + 0.2, p.b + 0.3):
+        b.odometry.pose = (a.odometry.pose[0] + x, a.odometry.pose[1], 0.0)
+        b.tick()
+        a.tick()
+        clock.now += p.period
+        seen.append((a.law_mode, set(a._held)))
+    assert seen == [(Mode.AVOID, {2}), (Mode.AVOID, {2}), (Mode.TRACK, set()),
+                    (Mode.TRACK, set())]
+
+
 def test_hold_before_the_epoch_and_disarmed_sends_nothing():
     clock, net, (agent,) = make_swarm([(0.0, 0.0, 0.0)], [(0.0, 0.0)], center0=(5.0, 0.0),
                                       epoch_in=1.0)
@@ -107,7 +131,7 @@ def test_driver_error_triggers_failsafe_with_its_name():
 def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     """On a cart (3 m/s, 2 m/s^2): the governor keeps it out of the silent robot's disc
     (where that could have driven before it must have stopped: 1.9 m), and the law goes
-    round it as an obstacle (b beyond its a/2 radius)."""
+    round it as an obstacle of that disc less a, so b from its surface is outside it."""
     cart = RobotParams(wheel_radius=0.0825, wheel_base=0.8, wheel_speed_limit=5.79,
                        wheel_ramp=3.86, drive_latency=0.02)
     clock, net, agents = make_swarm([(0.0, 0.0, 0.0), (4.0, 0.0, 0.0)],
@@ -119,13 +143,17 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     a.set_mode(AgentMode.FORMATION)
     near, obs_x, obs_y, obs_r = a._surroundings(a.odometry.pose, a.swarm.neighbours(),
                                                 a.swarm.obstacles(), clock.wall())
-    assert near.fresh_x == [] and (obs_x, obs_y, obs_r) == ([4.0], [0.0], [0.5])
+    disc = neighbour_hazard(0.0, 0.0, 1.0, 1.0, cart.a_max, cart.v_wheel_max, 0.5, 0.1,
+                            0.1 + cart.drive_latency)[0]
+    assert disc == pytest.approx(1.87, abs=0.01)
+    assert near.fresh_x == [] and (obs_x, obs_y) == ([4.0], [0.0])
+    assert obs_r == [pytest.approx(disc - 1.0)]
     dmin = np.inf
     for _ in range(400):
         a.tick()
         clock.now += 0.02
         dmin = min(dmin, np.hypot(*(np.subtract(a.odometry.pose[:2], [4.0, 0.0]))))
-    assert dmin > 1.0                          # went around it
+    assert dmin > disc                         # went around it, outside the disc
     assert a.odometry.pose[0] > 8.0
 
 

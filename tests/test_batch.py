@@ -66,6 +66,19 @@ def test_head_on_swap_resolves(lateral):
     assert res.pose[-1, 0, 0] > 9 and res.pose[-1, 1, 0] < -9   # they did swap
 
 
+def test_pair_hysteresis_is_kept_across_periods():
+    """Head on without the sidestep, hysteresis per pair: the batch simulator's held lists
+    keep the pair active above b, so the swap resolves with few mode switches (held lists
+    that forgot would be no hysteresis at all: over a thousand switches, no swap)."""
+    poses = np.array([[-10, 0, 0.0], [10, 0.0, math.pi]])
+    form = Formation(np.array([[10.0, 0], [-10.0, 0]]), (0.0, 0.0))
+    res = simulate(np.array([1, 2]), poses, form, Obstacles.empty(),
+                   ControlParams(sidestep=False, pair_hysteresis=True), RobotParams(),
+                   SimOptions(duration=20.0))
+    m = res.metrics.summary("swap", 20.0)
+    assert m["converged"] and m["mode_switches"] < 100
+
+
 def test_robots_starting_inside_each_others_avoidance_region_separate():
     poses = np.array([[0, 0, 0.0], [0.5, 1.2, 1.0], [1.0, -0.3, 2.0]])
     form = Formation(np.array([[0.0, 0], [0, 4], [0, -4]]), (20.0, 0.0))

@@ -70,6 +70,8 @@ def test_every_field_is_documented_with_a_unit():
         assert f.doc, f.name
         if f.type is bool:                  # a switch has no unit
             assert isinstance(f.default, bool), f.name
+        elif f.type is str:                 # a choice has its choices
+            assert f.default in f.meta["choices"], f.name
         else:
             assert f.unit and isinstance(f.default, float), f.name
 
@@ -78,10 +80,11 @@ def test_control_params_as_runtime_parameters():
     names = [p.name for p in CONTROL_PARAMS]
     assert names == ["BS_K", "BS_K_THETA", "BS_D_MAX", "BS_K_IJ", "BS_A", "BS_B", "BS_C",
                      "BS_PERIOD", "BS_U_MAX", "BS_HYST", "BS_SHARE_AGE"]
-    # every numeric field, in order; the governor and sidestep switches are no runtime
+    # every numeric field, in order; the switches and the law's name are no runtime
     # parameters
+    switches = ("governor", "sidestep", "pair_hysteresis", "law")
     assert [p.field for p in CONTROL_PARAMS] == [f.name for f in dataclasses.fields(ControlParams)
-                                                 if f.name not in ("governor", "sidestep")]
+                                                 if f.name not in switches]
     assert [p.index for p in CONTROL_PARAMS] == list(range(len(names)))
     period = CONTROL_PARAMS[names.index("BS_PERIOD")]
     assert period.read_only and "read-only at runtime" in period.read_only

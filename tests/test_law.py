@@ -90,6 +90,43 @@ def test_hysteresis_on_neighbour_avoidance():
     assert released.mode[0] == Mode.TRACK
 
 
+@pytest.mark.parametrize("per_pair", [True, False])
+def test_hysteresis_per_pair_holds_only_the_pairs_that_came_within_b(per_pair):
+    """A robot between two neighbours 2.3 m away (between b and b + hysteresis), the pair
+    with the one on its left active last period, the other not: per pair, only the left
+    one is avoided, so the robot moves away from it (to the right, -y); per robot, both
+    are, and their pushes cancel across the robot's axis (it goes neither way)."""
+    d = P.b + 0.3
+    inp = single([0, 0, 0], [0, 20], nbrs=[(0, d), (0, -d)])._replace(held=[1.0, 0.0])
+    out = step(inp, LawMemory(avoiding=True),
+               params=ControlParams(pair_hysteresis=per_pair))
+    assert out.mode[0] == Mode.AVOID
+    if per_pair:
+        # descend away from the left neighbour: heading -pi/2, e_theta = pi/2
+        assert out.u[0] == pytest.approx(-P.K_theta * math.pi / 2)
+    else:
+        assert out.v[0] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_pair_active_enters_below_b_and_leaves_beyond_b_plus_hysteresis():
+    from agent.law import pair_active
+    b, h = P.b, P.hysteresis
+    assert pair_active((b - 0.01) ** 2, False, b, h)
+    assert not pair_active((b + 0.01) ** 2, False, b, h)
+    assert pair_active((b + h - 0.01) ** 2, True, b, h)
+    assert not pair_active((b + h + 0.01) ** 2, True, b, h)
+
+
+def test_law_paper_turns_the_deadlock_resolution_off():
+    from agent.law import LawParams
+    on = LawParams.of(ControlParams(sidestep=True, pair_hysteresis=True), None)
+    paper = LawParams.of(ControlParams(sidestep=True, pair_hysteresis=True, law="paper"), None)
+    assert (on.sidestep, on.pair_hysteresis) == (True, True)
+    assert (paper.sidestep, paper.pair_hysteresis) == (False, False)
+    out = step(single([0, 0, 0], [20, 0], nbrs=[(3, 0)]), params=ControlParams(law="paper"))
+    assert out.u[0] == pytest.approx(0.0)          # drives at the neighbour in the way
+
+
 def test_obstacle_closer_than_b_triggers_avoid_away_from_it():
     # obstacle surface 1.5 m ahead; reference beyond it
     out = step(single([0, 0, math.pi], [20, 0], obstacles=[((4.5, 0), 3.0)]))

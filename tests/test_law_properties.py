@@ -26,7 +26,8 @@ point = st.tuples(near, near)
 
 @st.composite
 def cases(draw):
-    """(pose, ref, nbr_x, nbr_y, obs_x, obs_y, obs_r, hazards x, y, full, half, moving, memory)
+    """(pose, ref, nbr_x, nbr_y, nbr_held, obs_x, obs_y, obs_r, hazards x, y, full, half,
+    moving, memory)
     around a random base point; references and neighbours may coincide with the robot
     (D = 0, r = 0); the hazards are the neighbours and obstacles, as agents build them."""
     bx, by = draw(coord), draw(coord)
@@ -46,7 +47,8 @@ def cases(draw):
                         draw(wheels), draw(wheels))
     hazards = [(q[0], q[1], -math.inf, P.a, 1.0) for q in nbrs] + \
         [(o[0][0], o[0][1], o[1] + P.a, -math.inf, 0.0) for o in obs]
-    return (pose, ref, [q[0] for q in nbrs], [q[1] for q in nbrs],
+    held = [float(draw(st.booleans())) for _ in nbrs]
+    return (pose, ref, [q[0] for q in nbrs], [q[1] for q in nbrs], held,
             [o[0][0] for o in obs], [o[0][1] for o in obs], [o[1] for o in obs],
             *([h[c] for h in hazards] for c in range(5)), mem)
 
@@ -103,7 +105,7 @@ def test_compiled_law_equals_the_interpreted_one(case, lp):
 @given(st.floats(0.0, 1e-12), angle)
 def test_reference_at_the_robot(offset, theta):
     v, u, _, _, _ = law_step(1.0, 2.0, theta, 1.0 + offset, 2.0, 0.0, 0.0, [], [], [], [], [],
-                             [], [], [], [], [], LawMemory(), LP, P.period)
+                             [], [], [], [], [], [], LawMemory(), LP, P.period)
     assert math.isfinite(u) and abs(v) <= P.K * 1e-12 + 1e-15
 
 
@@ -115,9 +117,9 @@ def test_turning_takes_the_ramp_first_unless_the_robot_must_brake():
     step = CART.wheel_ramp * P.period
     mem = LawMemory(wheel_r=2.0, wheel_l=2.0)
     free = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], [], [],
-                    [], mem, LP_CART, P.period)[4]
+                    [], [], mem, LP_CART, P.period)[4]
     assert free.wheel_r - free.wheel_l == pytest.approx(2 * step)
-    braking = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [1.2], [0.0],
+    braking = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [1.2], [0.0],
                        [1.0], [-math.inf], [0.0], mem, LP_CART, P.period)[4]
     assert braking.wheel_r + braking.wheel_l == pytest.approx(4.0 - 2 * step)
     assert braking.wheel_r == pytest.approx(braking.wheel_l)

@@ -59,14 +59,15 @@ class FakeVehicle:
     """A VehicleControl that records calls; ``refuse`` maps a call name to its reason."""
 
     def __init__(self):
-        self.mode, self.failsafe = AgentMode.DISARMED, None
+        self.mode, self.failsafe, self.deadlock = AgentMode.DISARMED, None, None
         self.pose, self.v, self.u = (3.0, 4.0, 0.3), 1.0, 0.5
         self.values = {p.name: float(getattr(ControlParams(), p.field)) for p in CONTROL_PARAMS}
         self.refuse: dict[str, str] = {}
         self.calls: list = []
 
     def state(self):
-        return VehicleState(self.mode, self.failsafe, *self.pose, self.v, self.u)
+        return VehicleState(self.mode, self.failsafe, *self.pose, self.v, self.u,
+                            self.deadlock)
 
     def arm(self):
         self.calls.append("arm")
@@ -260,6 +261,21 @@ def test_heartbeat_follows_mode_and_failsafe(make_rig):
     assert "armed, mode HOLD" in texts and "failsafe: driver feedback lost" in texts
 
 
+def test_deadlock_is_reported_once_and_its_end_too(make_rig):
+    rig = make_rig()
+    rig.until("HEARTBEAT")
+    rig.vehicle.deadlock = "12.0 m off, <0.5 m closer in 10 s"
+    rig.until("HEARTBEAT")
+    rig.vehicle.deadlock = "12.1 m off, <0.5 m closer in 10 s"    # still deadlocked
+    rig.until("HEARTBEAT")
+    texts = rig.texts()
+    assert [t for t in texts if t.startswith("deadlocked")] == [
+        "deadlocked: 12.0 m off, <0.5 m closer in 10 s"]
+    rig.vehicle.deadlock = None
+    rig.until("HEARTBEAT")
+    assert "progressing again" in rig.texts()
+
+
 # --- commands ---------------------------------------------------------------------------
 def test_arm_disarm_and_modes_are_acknowledged(make_rig):
     rig = make_rig()
@@ -355,7 +371,7 @@ NEW_VALUES = {"BS_K": 3.5, "BS_K_THETA": 2.5, "BS_D_MAX": 2.5, "BS_K_IJ": 2.0, "
 
 def test_param_names_fit_mavlink():
     names = [p.name for p in ParamTable(CONTROL_PARAMS).params]
-    numeric = [f for f in dataclasses.fields(ControlParams) if f.type != "bool"]
+    numeric = [f for f in dataclasses.fields(ControlParams) if f.type not in ("bool", "str")]
     assert len(set(names)) == len(names) == len(numeric)
     assert all(len(n) <= 16 for n in names)
     assert set(NEW_VALUES) | {"BS_PERIOD"} == set(names)

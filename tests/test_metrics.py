@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from firmware_sim.metrics import TOLERANCE_MARGIN, RunMetrics
+from agent.progress import TOLERANCE_MARGIN
+from firmware_sim.metrics import RunMetrics
 from firmware_sim.swarm_step import period_summary
 
 

@@ -7,8 +7,8 @@ from agent.kinematics import arc_step
 from agent.neighbours import in_range
 
 
-def state(stamp, x, y, theta, v, u):
-    return SimpleNamespace(stamp=stamp, x=x, y=y, theta=theta, v=v, u=u)
+def state(stamp, x, y, theta, v, u, robot_id=0):
+    return SimpleNamespace(robot_id=robot_id, stamp=stamp, x=x, y=y, theta=theta, v=v, u=u)
 
 
 def fresh(got):

@@ -121,6 +121,7 @@ class VehicleState:
     theta: float                  # rad, heading from +x (east), counter-clockwise
     v: float                      # m/s, forward speed commanded (after saturation)
     u: float                      # rad/s, turn rate commanded, counter-clockwise
+    deadlock: str | None = None   # why the robot is deadlocked (agent.progress), if it is
 
 
 class VehicleControl(Protocol):
@@ -445,6 +446,11 @@ class MavlinkLink:
                 self._statustext(mav2.MAV_SEVERITY_INFO, "failsafe cleared")
             else:
                 self._statustext(mav2.MAV_SEVERITY_CRITICAL, f"failsafe: {state.failsafe}")
+        if (state.deadlock is None) != (last.deadlock is None):
+            if state.deadlock is None:
+                self._statustext(mav2.MAV_SEVERITY_INFO, "progressing again")
+            else:
+                self._statustext(mav2.MAV_SEVERITY_WARNING, f"deadlocked: {state.deadlock}")
 
     def _gcs_failsafe(self, now: float, state: VehicleState) -> VehicleState:
         """HOLD while no GCS heartbeat for ``gcs_timeout`` (counted from the first poll)."""
