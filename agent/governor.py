@@ -125,8 +125,10 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     than it may go brakes at the full ramp.
 
     While it stops, the robot's heading sweeps on at u_now (braking takes the whole ramp of
-    both wheels, so the turn rate holds) and may turn up to ``turn_rate`` [rad/s] more
-    during the reaction time. A hazard counts with the cosine of its bearing's angle to the
+    both wheels, so the turn rate holds) and may turn further during the reaction time: at
+    up to ``turn_rate`` [rad/s] more, or, with finite ``accel``, as far as its wheels can
+    bend the path in that time (u changing at 2 accel / wheel_base: accel tau^2 /
+    wheel_base), whichever is less. A hazard counts with the cosine of its bearing's angle to the
     nearest heading of that sweep (1 inside it; none beyond 90 degrees); a moving one as if
     its bearing were MOVING_PAD nearer, as its own motion turns the line of sight. Hazards
     farther than the robot needs to stop from ``top_speed`` [m/s] are skipped."""
@@ -136,7 +138,10 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     turn = 0.5 * abs(u_now) * wheel_base                 # m/s, the wheels' half difference
     stop_time = reaction + (0.0 if math.isinf(accel) else (abs(v_now) + turn) / accel)
     sweep = u_now * stop_time
-    spread = 0.5 * abs(sweep) + turn_rate * reaction
+    bend = turn_rate * reaction
+    if not math.isinf(accel) and wheel_base > 0.0:
+        bend = min(bend, accel * reaction * reaction / wheel_base)
+    spread = 0.5 * abs(sweep) + bend
     middle = theta + 0.5 * sweep
     reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period, turn)
     for h in range(len(haz_r)):
