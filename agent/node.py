@@ -34,7 +34,6 @@ from agent.law import LawMemory, LawParams, law_step
 from agent.loop import Clock
 from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry
-from common import drivers
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import MotorPort, SwarmPort
 from common.schema import ConfigError, Param
@@ -288,7 +287,7 @@ class Agent:
         robots, which are among the neighbours)."""
         s, r = self.s, self.s.robot
         top = min(s.control.v_max, r.v_wheel_max)
-        stop_time = drivers.WATCHDOG + r.drive_latency
+        stop_time = r.watchdog_timeout + r.drive_latency
         hx: list[float] = []
         hy: list[float] = []
         hr: list[float] = []
