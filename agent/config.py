@@ -92,6 +92,11 @@ class RobotParams:
     wheel_ramp: float = _param(drivers.RAMP, "rev/s^2", "driver velocity ramp rate (VEL_RAMP)")
     drive_latency: float = _param(0.0, "s", "from a command leaving the computer to the "
                                   "drivers applying it (CAN, driver loop)", open_lo=False)
+    watchdog_timeout: float = setting(
+        drivers.WATCHDOG, unit="s", lo=0.0, open_lo=True, hi=drivers.WATCHDOG_MAX,
+        doc="the drivers' watchdog (ODrive axis.config.watchdog_timeout, with "
+            "enable_watchdog = True): a wheel goes on with its last command this long "
+            "after the last CAN frame to its driver, then idles")
 
     def __post_init__(self) -> None:
         validate(self)

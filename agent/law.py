@@ -51,7 +51,6 @@ from agent.avoidance import (
 from agent.config import ControlParams, RobotParams
 from agent.governor import speed_limits
 from agent.kinematics import TWO_PI, body_velocity, wheel_command, wrap_angle
-from common import drivers
 from common.vocabulary import Mode
 
 if TYPE_CHECKING:
@@ -89,7 +88,7 @@ class LawParams(NamedTuple):
         off (sidestep and per-pair hysteresis)."""
         inf = math.inf
         limits = ((robot.a_max, robot.drive_latency, robot.wheel_radius, robot.wheel_base,
-                   robot.wheel_speed_limit, robot.wheel_ramp, drivers.WATCHDOG)
+                   robot.wheel_speed_limit, robot.wheel_ramp, robot.watchdog_timeout)
                   if robot is not None else (inf, 0.0, 1.0, 1.0, inf, inf, 0.0))
         resolve = control.law != "paper"
         return cls(control.K, control.K_theta, control.D_max, control.K_ij, control.b,

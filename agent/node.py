@@ -35,7 +35,6 @@ from agent.loop import Clock
 from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry
 from agent.progress import PROGRESS, ProgressWatch, tolerance
-from common import drivers
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import MotorPort, SwarmPort
 from common.schema import ConfigError, Param
@@ -365,7 +364,7 @@ class Agent:
         s, r = self.s, self.s.robot
         return neighbour_hazard(m.v, 0.5 * m.u * r.wheel_base, age, s.control.a, r.a_max,
                                 min(s.control.v_max, r.v_wheel_max), s.timeouts.staleness,
-                                s.control.share_age, drivers.WATCHDOG + r.drive_latency)
+                                s.control.share_age, r.watchdog_timeout + r.drive_latency)
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],

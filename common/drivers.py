@@ -8,4 +8,6 @@ RIGHT_NODE = 1             # CAN node id of the right wheel's driver
 SPEED_LIMIT = 10.0         # rev/s, velocity limit per wheel
 RAMP = 1000.0              # rev/s^2, velocity ramp rate (VEL_RAMP input mode)
 CURRENT_LIMIT = 20.0       # A, motor current limit
-WATCHDOG = 0.1             # s, a driver without a velocity command for this long goes IDLE
+WATCHDOG = 0.1             # s, default watchdog timeout: a driver without a CAN frame for
+                           # this long in closed loop goes IDLE (robot profile: watchdog_timeout)
+WATCHDOG_MAX = 10.0        # s, the longest watchdog timeout a robot profile may give

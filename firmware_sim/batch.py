@@ -27,7 +27,6 @@ from agent.formation import Formation
 from agent.law import LawParams
 from agent.progress import TOLERANCE_MARGIN
 from agent.settings import TimeoutSettings
-from common import drivers
 from firmware_sim import compiled, swarm_step, world_step
 from firmware_sim.metrics import RunMetrics
 from firmware_sim.plant import PlantKind
@@ -256,7 +255,7 @@ class _WorldState:
                  k: types.SimpleNamespace):
         self.world, self.period, self.k = world, period, k
         self.truth = world.ideal
-        self.watchdog = drivers.WATCHDOG
+        self.watchdog = robot.watchdog_timeout
         self.staleness = world.staleness(TimeoutSettings().staleness)
         stop_time = self.watchdog + (0.0 if ideal else robot.drive_latency)
         top_speed = control.v_max if ideal else min(control.v_max, robot.v_wheel_max)

@@ -7,15 +7,20 @@
 * velocity control with VEL_RAMP: the set-point is clamped to vel_limit and the velocity
   follows it at ``ramp`` rev/s^2; other control/input modes are accepted but not emulated
   (the axis holds zero velocity);
-* watchdog: no Set_Input_Vel for ``watchdog`` s in closed loop -> WATCHDOG_TIMER_EXPIRED and
-  IDLE; Estop -> ESTOP_REQUESTED and IDLE; in IDLE the wheel coasts down (first order,
-  ``coast_tau``); Clear_Errors clears the errors;
+* watchdog as the firmware's (``axis.config.enable_watchdog``, ``watchdog_timeout``): fed by
+  every frame addressed to the axis' node (CAN Simple feeds it before handling any command,
+  requests included) and on entering closed loop; not fed for ``watchdog_timeout`` s in
+  closed loop -> WATCHDOG_TIMER_EXPIRED and IDLE (the firmware also latches the error in
+  IDLE; here it expires only in closed loop, where it stops a wheel); Estop ->
+  ESTOP_REQUESTED and IDLE; in IDLE the wheel coasts down (first order, ``coast_tau``);
+  Clear_Errors clears the errors;
 * the encoder position integrates the actual wheel speed (its mean over each step); bus
   voltage and a current that grows with acceleration and speed.
 
 :class:`DriverPair` serves the axes of one robot on its bus: commands in, Heartbeat (100 ms)
-and Get_Encoder_Estimates (10 ms) out, remote requests answered; malformed frames ignored
-and counted. Fault injection: silence a node, drop or delay a fraction of the frames it
+and Get_Encoder_Estimates (10 ms) out, remote requests answered; frames read as firmware reads
+them (the bytes their signals need, :func:`transport.odrive_frames.decode`), malformed ones
+ignored and counted. Fault injection: silence a node, drop or delay a fraction of the frames it
 sends (seeded RNG), raise an error bit. An imperfect world (docs/world.md) adds Gaussian
 noise to the positions the encoder estimates report (``encoder_noise``), never to the axis.
 
@@ -67,7 +72,8 @@ class EmulatedAxis:
 
     vel_limit: float = drivers.SPEED_LIMIT   # rev/s
     ramp: float = drivers.RAMP               # rev/s^2
-    watchdog: float = drivers.WATCHDOG       # s, 0 disables
+    enable_watchdog: bool = True
+    watchdog_timeout: float = drivers.WATCHDOG   # s
     coast_tau: float = 0.3           # s, spin-down time constant when IDLE
     bus_voltage: float = 24.0        # V
     state: int = AxisState.IDLE      # an AxisState member
@@ -79,7 +85,10 @@ class EmulatedAxis:
     pos: float = 0.0                 # rev
     current: float = 0.0             # A
     watchdog_trips: int = 0
-    _since_input: float = 0.0
+    _since_feed: float = 0.0         # s since the watchdog was last fed
+
+    def feed_watchdog(self) -> None:
+        self._since_feed = 0.0
 
     def request_state(self, requested: int) -> None:
         if requested == AxisState.CLOSED_LOOP_CONTROL:
@@ -87,13 +96,12 @@ class EmulatedAxis:
                 log.info("closed loop refused: error %s", AxisError(self.error))
                 return
             self.state = AxisState.CLOSED_LOOP_CONTROL    # keeps input_vel, as firmware does
-            self._since_input = 0.0
+            self.feed_watchdog()
         elif requested == AxisState.IDLE:
             self.state = AxisState.IDLE
 
     def input_vel(self, vel: float) -> None:
         self.setpoint = max(-self.vel_limit, min(self.vel_limit, vel))
-        self._since_input = 0.0
 
     def set_limits(self, vel_limit: float, current_limit: float) -> None:
         if vel_limit > 0 and math.isfinite(vel_limit):
@@ -112,14 +120,14 @@ class EmulatedAxis:
         before = vel = self.vel
         closed = self.state == AxisState.CLOSED_LOOP_CONTROL
         if closed:
-            self._since_input += dt
-            if self.watchdog and self._since_input > self.watchdog + 1e-9:
+            self._since_feed += dt
+            if self.enable_watchdog and self._since_feed > self.watchdog_timeout + 1e-9:
                 self.error |= AxisError.WATCHDOG_TIMER_EXPIRED
                 self.state = AxisState.IDLE
                 closed = False
                 self.watchdog_trips += 1
                 log.warning("watchdog expired after %.3f s without a command",
-                            self._since_input)
+                            self._since_feed)
         if closed:
             target = self.setpoint if (self.control_mode == ControlMode.VELOCITY_CONTROL
                                        and self.input_mode == InputMode.VEL_RAMP) else 0.0
@@ -177,7 +185,8 @@ class DriverPair:
             self.faults.setdefault(node, Faults())
 
     def configure(self, **axis_settings) -> None:
-        """Set emulation parameters on both axes (vel_limit, ramp, watchdog, ...)."""
+        """Set emulation parameters on both axes (vel_limit, ramp, enable_watchdog,
+        watchdog_timeout, ...)."""
         for axis in self.axes.values():
             for key, value in axis_settings.items():
                 setattr(axis, key, value)
@@ -215,7 +224,12 @@ class DriverPair:
             self._send(msg)
 
     def _receive(self, msg: can.Message) -> None:
-        """Handle one received frame (frames to ignore counted)."""
+        """Handle one received frame (frames to ignore counted). Any standard frame to an
+        axis' node feeds its watchdog, as CAN Simple does before looking at the command."""
+        if not (msg.is_extended_id or msg.is_error_frame):
+            axis = self.axes.get(msg.arbitration_id >> 5)
+            if axis is not None:
+                axis.feed_watchdog()
         try:
             frame = decode(msg)
         except FrameError as exc:

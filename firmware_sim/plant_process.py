@@ -21,7 +21,6 @@ import time
 from typing import Callable, Iterable
 
 from agent.loop import FixedRateLoop, SystemClock, use_realtime
-from common import drivers
 from common.payloads import WheelsMsg
 from firmware_sim.odrive_sim import DriverPair
 from firmware_sim.sitl_plant import PlantRobot, SitlPlant
@@ -30,7 +29,7 @@ from transport.zenoh_link import Arrivals, Keys, open_session, session_config
 
 log = logging.getLogger(__name__)
 
-MAX_STEP = 0.02   # s, longest physics step after a stall (the drivers' watchdog is 0.1 s)
+MAX_STEP = 0.02   # s, longest physics step after a stall (the drivers' watchdog: 0.1 s or more)
 
 
 def _stop_on_signals(stop: Callable[[], None]) -> None:
@@ -173,9 +172,11 @@ def run_world(scenario, swarm: str, conf, dt: float = 0.005, realtime_priority: 
 
 def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str],
                    can_interface: str, can_channel: str | None, can_ports: dict[int, int],
-                   dt: float = 0.005, watchdog: float = drivers.WATCHDOG,
+                   dt: float = 0.005, enable_watchdog: bool = True,
                    realtime_priority: int = 0) -> dict:
     """Host robots ``robot_ids`` of ``scenario`` until a signal; returns loop statistics.
+    The drivers' watchdog times out after the scenario robot's ``watchdog_timeout``
+    (``enable_watchdog`` False: disabled).
     ``realtime_priority`` > 0: the plant loop runs SCHED_FIFO (emulated hardware must not
     starve when the agents load the machine)."""
     clock = SystemClock()
@@ -193,7 +194,8 @@ def run_sitl_plant(scenario, robot_ids: list[int], swarm: str, connect: list[str
                                               encoder_noise=w.encoder_noise, noise_seed=w.seed,
                                               noise_key=index[rid])
             drivers.configure(vel_limit=r.wheel_speed_limit, ramp=r.wheel_ramp,
-                              watchdog=watchdog)
+                              enable_watchdog=enable_watchdog,
+                              watchdog_timeout=r.watchdog_timeout)
             robots.append(PlantRobot(rid, _pose(scenario.poses[index[rid]]), drivers))
         stats = _run_plant(session, keys, robots, scenario, dt, clock, realtime_priority)
         stats["cpu_seconds"] = time.process_time()

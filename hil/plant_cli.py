@@ -22,7 +22,6 @@ from typing import Any
 from rich.console import Console
 
 from agent.config import RobotParams
-from common import drivers
 from common.schema import add_argument_for
 from hil.cli_options import (
     Subparsers,
@@ -67,8 +66,9 @@ def add_parser(sub: Subparsers) -> None:
     add_can_options(p)
     p.add_argument("--can-base-port", type=int,
                    help="robot ID's udp_multicast bus is on port BASE + ID")
-    p.add_argument("--watchdog", type=float, default=drivers.WATCHDOG,
-                   help="s (0 disables; default: %(default)s)")
+    p.add_argument("--no-watchdog", action="store_true",
+                   help="the emulated drivers run with their watchdog disabled (default: "
+                        "enabled, with the robot's watchdog_timeout)")
     p.add_argument("--realtime-priority", type=priority, default=0, metavar="P",
                    help="the plant's loop runs SCHED_FIFO at P (0: normal scheduling)")
     p.add_argument("--stats", help="write loop statistics (JSON) at exit")
@@ -81,8 +81,9 @@ def add_parser(sub: Subparsers) -> None:
     add_argument_for(p, "--right-node", CanSettings, "right_node")
     add_argument_for(p, "--vel-limit", RobotParams, "wheel_speed_limit")
     add_argument_for(p, "--ramp", RobotParams, "wheel_ramp")
-    p.add_argument("--watchdog", type=float, default=drivers.WATCHDOG,
-                   help="s (0 disables; default: %(default)s)")
+    add_argument_for(p, "--watchdog", RobotParams, "watchdog_timeout")
+    p.add_argument("--no-watchdog", action="store_true",
+                   help="the watchdog disabled (ODrive axis.config.enable_watchdog = False)")
     p.add_argument("--rate", type=_drivers_rate, default=200.0, metavar="HZ",
                    help="loop rate (encoder estimates go out at 100 Hz)")
     p.add_argument("--realtime-priority", type=priority, default=0, metavar="P",
@@ -135,7 +136,7 @@ def run_sitl(args: argparse.Namespace, console: Console) -> int:
         raise BadInput(f"--robots: {unknown} are not in {args.scenario}")
     ports = {rid: args.can_base_port + rid for rid in ids} if args.can_base_port else {}
     stats = run_sitl_plant(sc, ids, args.swarm, args.zenoh_connect, args.can_interface,
-                           args.can_channel, ports, watchdog=args.watchdog,
+                           args.can_channel, ports, enable_watchdog=not args.no_watchdog,
                            realtime_priority=args.realtime_priority)
     _write_stats(args.stats, stats)
     return EXIT_OK
@@ -151,12 +152,14 @@ def run_drivers(args: argparse.Namespace, console: Console) -> int:
     if conf is not None and (args.robot is None or args.swarm is None):
         raise BadInput("with --zenoh-config or --zenoh-connect, give --robot and --swarm")
     # the flags' values checked as the settings they are (bad values: exit 2, field named)
-    limits = RobotParams(wheel_speed_limit=args.vel_limit, wheel_ramp=args.ramp)
+    limits = RobotParams(wheel_speed_limit=args.vel_limit, wheel_ramp=args.ramp,
+                         watchdog_timeout=args.watchdog)
     nodes = CanSettings(left_node=args.left_node, right_node=args.right_node)
     bus = open_bus(args.can_interface, args.can_channel, port=args.can_port)
     pair = DriverPair(bus, left_node=nodes.left_node, right_node=nodes.right_node)
     pair.configure(vel_limit=limits.wheel_speed_limit, ramp=limits.wheel_ramp,
-                   watchdog=args.watchdog)
+                   enable_watchdog=not args.no_watchdog,
+                   watchdog_timeout=limits.watchdog_timeout)
     console.print(f"emulated drivers (nodes {args.left_node} left, {args.right_node} "
                   f"right) on {args.can_interface} {args.can_channel or ''}; Ctrl-C stops")
     if conf is None:

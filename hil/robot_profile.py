@@ -5,8 +5,8 @@
     name = "cart"                   # optional
     description = "..."             # optional
     [robot]                         # agent.config.RobotParams (wheel_radius, wheel_base,
-                                    # wheel_speed_limit, wheel_ramp, drive_latency), all
-                                    # optional
+                                    # wheel_speed_limit, wheel_ramp, drive_latency,
+                                    # watchdog_timeout), all optional
 
 ``--robot FILE`` of ``sim`` and ``sitl`` replaces the scenario's ``[robot]`` table with the
 profile's (``robots/`` has the paper's ideal robot and two real ones). Every problem raises

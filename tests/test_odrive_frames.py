@@ -53,8 +53,9 @@ def test_any_node_id_uses_the_same_layouts():
 def test_remote_requests_and_empty_messages():
     rtr = request(1, Cmd.GET_ENCODER_ESTIMATES)
     assert rtr.is_remote_frame and rtr.dlc == 8 and decode(rtr).rtr
-    assert encode(0, Cmd.ESTOP).dlc == 0 and decode(encode(0, Cmd.CLEAR_ERRORS)).cmd == \
-        Cmd.CLEAR_ERRORS
+    assert encode(0, Cmd.ESTOP).dlc == 0
+    clear = encode(0, Cmd.CLEAR_ERRORS, Identify=0)
+    assert clear.data == b"\0" and decode(clear).signals == {"Identify": 0}
 
 
 @pytest.mark.parametrize("msg, reason", [

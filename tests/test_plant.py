@@ -113,7 +113,8 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
     robot = RobotParams(wheel_ramp=100.0)
     right, left = 3.0, 1.0                                  # rev/s, reached after 30 ms
     drivers = DriverPair(_NoBus())
-    drivers.configure(ramp=robot.wheel_ramp, vel_limit=robot.wheel_speed_limit, watchdog=0.0)
+    drivers.configure(ramp=robot.wheel_ramp, vel_limit=robot.wheel_speed_limit,
+                      enable_watchdog=False)
     for node, target in ((drivers.right_node, right), (drivers.left_node, left)):
         drivers.axes[node].request_state(AxisState.CLOSED_LOOP_CONTROL)
         drivers.axes[node].input_vel(target)

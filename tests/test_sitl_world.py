@@ -56,7 +56,7 @@ class _Bus:
 def _driving(right, left, **noise):
     """Emulated drivers in closed loop turning their wheels at (right, left) [rev/s]."""
     drivers = DriverPair(_Bus(), **noise)
-    drivers.configure(ramp=1000.0, watchdog=0.0)
+    drivers.configure(ramp=1000.0, enable_watchdog=False)
     for node, target in ((drivers.right_node, right), (drivers.left_node, left)):
         drivers.axes[node].request_state(AxisState.CLOSED_LOOP_CONTROL)
         drivers.axes[node].input_vel(target)

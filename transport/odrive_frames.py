@@ -10,6 +10,11 @@ at import, so their layout still comes from the DBC alone.
 Node ids: arbitration id = node_id << 5 | cmd_id. The DBC lists every message for nodes 0
 and 1 (so ``cantools decode`` reads a capture of a default robot); this module uses the
 node-0 layouts for any node id 0..63 by masking the node bits.
+
+Lengths: frames are sent with the DBC's length (that of ODrive's official DBC). A received
+frame is read as real firmware reads it: it must carry the bytes its signals need
+(:func:`needed_bytes`; a signal the DBC marks ``SigOptional``, such as Clear_Errors'
+Identify, may be left off and reads as 0), and bytes past those are ignored.
 """
 from __future__ import annotations
 
@@ -71,6 +76,28 @@ def float32_layout(cmd: Cmd, *names: str) -> struct.Struct:
     if len(layout.signals) != len(names) or layout.length != 4 * len(names):
         raise ValueError(f"{layout.name} has other signals or bytes than {names}")
     return struct.Struct("<" + "f" * len(names))
+
+
+CLASSIC_CAN_BYTES = 8     # most data bytes of a classic CAN frame
+
+
+def _optional(signal: cantools.database.can.Signal) -> bool:
+    """The DBC marks the signal optional (SigOptional = 1): a frame may leave it off."""
+    attr = signal.dbc.attributes.get("SigOptional") if signal.dbc is not None else None
+    return attr is not None and attr.value == 1
+
+
+@lru_cache(maxsize=None)
+def needed_bytes(cmd: Cmd) -> int:
+    """The data bytes a frame of ``cmd`` must carry: up to the last byte of its last
+    signal that is not optional (0 for a frame without one, e.g. Estop, Clear_Errors)."""
+    ends = []
+    for s in _layout(cmd).signals:
+        if s.byte_order != "little_endian":       # the end below holds for these only
+            raise ValueError(f"{_layout(cmd).name}.{s.name} is not little-endian")
+        if not _optional(s):
+            ends.append((s.start + s.length + 7) // 8)
+    return max(ends, default=0)
 
 
 class FloatFrame(NamedTuple):
@@ -149,7 +176,8 @@ def arbitration_id(node: int, cmd: Cmd) -> int:
 
 
 class FrameError(ValueError):
-    """A frame to ignore; ``reason``: unknown_id, dlc or nonfinite."""
+    """A frame to ignore; ``reason``: unknown_id, dlc (fewer bytes than its signals need,
+    or more than a classic CAN frame has) or nonfinite."""
 
     def __init__(self, reason: str, detail: str):
         super().__init__(f"{reason}: {detail}")
@@ -203,16 +231,18 @@ def decode(msg: can.Message) -> Frame:
     layout = _layout(cmd)
     if msg.is_remote_frame:
         return Frame(node, cmd, {}, rtr=True)
-    if len(msg.data) != layout.length:
-        raise FrameError("dlc", f"{cmd.name} of node {node}: {len(msg.data)} bytes, "
-                                f"expected {layout.length}")
+    size = len(msg.data)
+    if not needed_bytes(cmd) <= size <= CLASSIC_CAN_BYTES:
+        raise FrameError("dlc", f"{cmd.name} of node {node}: {size} bytes, expected "
+                                f"{needed_bytes(cmd)} to {CLASSIC_CAN_BYTES}")
     fast = FLOAT_FRAMES.get(cmd)
     if fast is not None:
-        values = fast.packer.unpack(msg.data)
+        values = fast.packer.unpack_from(msg.data)
         signals = dict(zip(fast.names, values))
         finite = all(map(math.isfinite, values))
-    else:
-        decoded = (layout.decode(bytes(msg.data), decode_choices=False, scaling=False)
+    else:      # the bytes the layout has: optional ones left off read as 0, extra ignored
+        data = bytes(msg.data[:layout.length]).ljust(layout.length, b"\0")
+        decoded = (layout.decode(data, decode_choices=False, scaling=False)
                    if layout.signals else {})
         if not isinstance(decoded, dict):   # a list only for container messages: none here
             raise TypeError(f"{layout.name} decoded as a container message")

@@ -4,7 +4,8 @@ Arming: clear errors, velocity control with VEL_RAMP, limits, CLOSED_LOOP_CONTRO
 period the agent sends both wheel velocities [rev/s] (which also feeds the drivers'
 watchdogs). Feedback is drained without blocking: heartbeats (state, errors) and encoder
 estimates per axis, each with its age on the injected monotonic clock. Shutdown: zero
-velocity, then IDLE. Frames that do not decode are ignored and counted.
+velocity, then IDLE. Frames go out with the lengths of ODrive's official DBC; frames that
+do not decode are ignored and counted.
 """
 from __future__ import annotations
 
@@ -99,7 +100,8 @@ class WheelDrivers:
                           Input_Torque_FF=0.0))
 
     def clear_errors(self) -> None:
-        self._both(Cmd.CLEAR_ERRORS)
+        """Clear_Errors as the official DBC lays it out: its one byte, Identify = 0."""
+        self._both(Cmd.CLEAR_ERRORS, Identify=0)
 
     def estop(self) -> None:
         self._both(Cmd.ESTOP)
