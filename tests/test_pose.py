@@ -221,3 +221,15 @@ def test_the_pose_table_is_read_and_checked_naming_file_and_key(tmp_path):
         PoseSettings(drift=2.0)
     with pytest.raises(ValueError, match="port of its fixes"):
         Agent(load_settings(good), None, None, SimClock())
+
+
+def test_a_ground_station_is_told_why_arming_is_refused():
+    from agent.process import AgentVehicle
+    clock, net, agent, world, feed = slipping_agent(PoseSettings())
+    feed.stopped = True
+    drive(clock, agent, world, feed, 0.1)
+    assert AgentVehicle(agent).arm() == "arming refused: no pose fix yet"
+    feed.stopped = False
+    drive(clock, agent, world, feed, 0.1)
+    assert AgentVehicle(agent).arm() is None and AgentVehicle(agent).state().mode is \
+        AgentMode.HOLD
