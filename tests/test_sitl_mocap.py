@@ -132,6 +132,13 @@ def test_the_launcher_gives_the_agents_a_pose_table_only_with_mocap(tmp_path):
                           14550).pose is None
 
 
+def test_sim_says_it_does_not_model_the_mocap_table(tmp_path, capsys):
+    from hil.cli import main
+    path, _ = _scenario(tmp_path, duration=0.5)
+    assert main(["sim", str(path), "--out", str(tmp_path / "run")]) == 0
+    assert "[mocap] (simulated motion capture) is for sitl" in capsys.readouterr().out
+
+
 def test_sitl_with_fixes_on_slipping_wheels_and_a_robot_whose_fixes_stop(tmp_path):
     """3 robots, 3 % wheel slip, fixes at 100 Hz with 5 % dropouts; robot 2's stop from 3 s
     to 4 s: its agent brakes to a (sticky) failsafe HOLD naming the fix's age and stands
