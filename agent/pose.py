@@ -37,7 +37,7 @@ class PoseSettings:
     capture) whose fixes arrive on ``boundswarm/<swarm>/robot/<id>/fix``. Absent: odometry
     alone."""
 
-    fix_timeout: float = setting(0.25, unit="s", doc="a fix older than this (from its capture "
+    fix_timeout: float = setting(0.5, unit="s", doc="a fix older than this (from its capture "
                                  "time): failsafe HOLD; arming needs a younger one",
                                  lo=0.0, open_lo=True)
     drift: float = setting(0.05, doc="odometry position error per metre the wheels drive "

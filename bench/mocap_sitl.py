@@ -40,7 +40,7 @@ noise = 0.001
 heading_noise = 0.002
 latency = 0.01
 dropout = 0.01
-fix_timeout = 0.25
+fix_timeout = 0.5
 """
 OUTAGE = """[[mocap.outage]]
 robot = {robot}

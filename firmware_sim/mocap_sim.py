@@ -50,7 +50,7 @@ class MocapParams:
     latency: float = setting(0.01, unit="s", lo=0.0, hi=0.5,
                              doc="from the capture to the publication")
     dropout: float = setting(0.0, lo=0.0, hi=0.99, doc="fraction of fixes lost")
-    fix_timeout: float = setting(0.25, unit="s", lo=0.0, open_lo=True,
+    fix_timeout: float = setting(0.5, unit="s", lo=0.0, open_lo=True,
                                  doc="the agents' [pose] fix_timeout")
     seed: int = setting(0, lo=0, doc="seed of the noise and dropouts")
     outage: tuple[Outage, ...] = tables(doc="robots whose fixes stop ([[mocap.outage]] "

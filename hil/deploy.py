@@ -17,7 +17,7 @@ Swarm manifest (TOML, ``version = 1``)::
     options = []                     # further connect options, key=value
     error = 0.005                    # m, each fix's position error bound
     latency = 0.0                    # s, capture to arrival at the ground station
-    fix_timeout = 0.25               # s, the robots' [pose] fix_timeout
+    fix_timeout = 0.5                # s, the robots' [pose] fix_timeout
     [[robots]]
     id = 1
     host = "robot-1.local"           # name or address of the robot computer

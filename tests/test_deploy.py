@@ -340,7 +340,7 @@ def test_the_example_manifest_deploys_with_its_motion_capture_bridge(tmp_path):
     assert [(b.name, b.robot) for b in bridge.bodies] == [(f"cart{i}", i) for i in range(1, 10)]
     assert bridge.zenoh.config == str(tmp_path / "ground" / "ground-client.json5")
     agent = load_settings(tmp_path / "robot-4" / "agent.toml")
-    assert agent.pose == PoseSettings(fix_timeout=0.25) and agent.robot_id == 4
+    assert agent.pose == PoseSettings(fix_timeout=0.5) and agent.robot_id == 4
     notes = (tmp_path / "ground" / "README.md").read_text()
     assert "boundswarm mocap --config mocap.toml" in notes and "cart4 -> robot 4" in notes
     assert "README.md[mocap]" in notes                     # the bundled wheel, its extra

@@ -92,7 +92,7 @@ rate = 100.0
 noise = 0.002
 latency = 0.01
 dropout = 0.05
-fix_timeout = 0.25
+fix_timeout = 0.5
 [[mocap.outage]]
 robot = 2
 at = 3.0
@@ -126,7 +126,7 @@ def test_the_launcher_gives_the_agents_a_pose_table_only_with_mocap(tmp_path):
     from hil.sitl import SitlOptions, agent_settings
     _, sc = _scenario(tmp_path)
     s = agent_settings(sc, 1, "tiny", "tcp/127.0.0.1:7447", SitlOptions(), 14550)
-    assert s.pose is not None and s.pose.fix_timeout == 0.25
+    assert s.pose is not None and s.pose.fix_timeout == 0.5
     _, alone = _scenario(tmp_path, "")
     assert agent_settings(alone, 1, "tiny", "tcp/127.0.0.1:7447", SitlOptions(),
                           14550).pose is None
@@ -141,8 +141,8 @@ def test_sim_says_it_does_not_model_the_mocap_table(tmp_path, capsys):
 
 def test_sitl_with_fixes_on_slipping_wheels_and_a_robot_whose_fixes_stop(tmp_path):
     """3 robots, 3 % wheel slip, fixes at 100 Hz with 5 % dropouts; robot 2's stop from 3 s
-    to 4 s: its agent brakes to a (sticky) failsafe HOLD naming the fix's age and stands
-    still; the others keep their pose error small and avoid it; no collision."""
+    to 4 s (0.5 s timeout): its agent brakes to a (sticky) failsafe HOLD naming the fix's
+    age and stands still; the others keep their pose error small and avoid it; no collision."""
     path, sc = _scenario(tmp_path)
     out = tmp_path / "run"
     proc = subprocess.Popen(
@@ -158,7 +158,7 @@ def test_sitl_with_fixes_on_slipping_wheels_and_a_robot_whose_fixes_stop(tmp_pat
         return [p for p in list(m.get("plants", {}).values())
                 + [r.get("pid") for r in m.get("robots", {}).values()] if p]
     try:
-        text, _ = proc.communicate(timeout=150)
+        text, _ = proc.communicate(timeout=240)
         text = text.decode(errors="replace")
         assert proc.returncode == 0, text
         m = json.loads((out / "metrics.json").read_text())
@@ -168,7 +168,7 @@ def test_sitl_with_fixes_on_slipping_wheels_and_a_robot_whose_fixes_stop(tmp_pat
             assert m["pose_error"][rid]["p99"] < 0.05, m["pose_error"]
         failsafe = m["sitl"]["failsafes"]
         assert set(failsafe) == {"2"}, failsafe
-        assert failsafe["2"].startswith("pose fix 0.2") and "(limit 0.25 s)" in failsafe["2"]
+        assert failsafe["2"].startswith("pose fix 0.5") and "(limit 0.5 s)" in failsafe["2"]
         assert "[pose]" in (out / "config" / "robot_2.toml").read_text()
         stats = json.loads((out / "logs" / "agent_1.json").read_text())["pose"]
         assert stats["applied"] > 300 and stats["fixes"]["dropped"] == {}
@@ -177,11 +177,11 @@ def test_sitl_with_fixes_on_slipping_wheels_and_a_robot_whose_fixes_stop(tmp_pat
         # braking at a_max: the cart's, the SITL's default profile), and stays
         traj = np.loadtxt(out / "trajectories.csv", delimiter=",", skiprows=1)
         two = traj[traj[:, 1] == 2]                            # t, id, x, y, theta, v, ...
-        k = np.flatnonzero((two[:, 0] >= 3.25) & (two[:, 5] == 0.0))[0]
-        assert 3.25 <= two[k, 0] <= 3.35                        # fix_timeout after the stop
+        k = np.flatnonzero((two[:, 0] >= 3.5) & (two[:, 5] == 0.0))[0]
+        assert 3.5 <= two[k, 0] <= 3.6                          # fix_timeout after the stop
         v, a_max, reaction = abs(two[k - 1, 5]), 2.0, 0.02 + 0.02
         assert v > 0.3                                          # it was moving
-        rest = two[two[:, 0] >= 4.8]
+        rest = two[two[:, 0] >= 5.2]
         assert np.ptp(rest[:, 2]) < 0.01 and np.ptp(rest[:, 3]) < 0.01
         travel = math.hypot(rest[0, 2] - two[k, 2], rest[0, 3] - two[k, 3])
         assert travel <= v * reaction + v * v / (2.0 * a_max) + 0.05, (travel, v)
