@@ -64,6 +64,7 @@ class PoseFusion:
         self.last_stamp = -math.inf   # s, capture time of the last fix applied
         self.applied = 0
         self.dropped_late = 0         # fixes older than the history
+        self.dropped_future = 0       # fixes stamped after now + fix_timeout (clocks apart)
         self.pose: Pose = (0.0, 0.0, 0.0)
 
     def _apply(self, x: float, y: float, theta: float) -> Pose:
@@ -98,12 +99,16 @@ class PoseFusion:
 
     def fix(self, msg: FixMsg) -> bool:
         """Correct the estimate with ``msg`` if it is new; False if it was not applied
-        (already applied, or captured before the odometry kept)."""
+        (already applied, captured before the odometry kept, or stamped later than now +
+        ``fix_timeout``: a source whose clock is ahead, whose fix would never age)."""
         hist = self._hist
         if msg.stamp <= self.last_stamp or not hist:
             return False
         if msg.stamp < hist[0][0]:
             self.dropped_late += 1
+            return False
+        if msg.stamp > hist[-1][0] + self.s.fix_timeout:
+            self.dropped_future += 1
             return False
         ox, oy, oth, driven = _at(hist, msg.stamp)
         ex, ey, eth = self._apply(ox, oy, oth)

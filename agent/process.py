@@ -153,7 +153,8 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
             stats["impairment"] = impaired.counters()
         if fixes is not None and agent.fusion is not None:
             stats["pose"] = {"fixes": fixes.counters(), "applied": agent.fusion.applied,
-                             "dropped_late": agent.fusion.dropped_late}
+                             "dropped_late": agent.fusion.dropped_late,
+                             "dropped_future": agent.fusion.dropped_future}
         if stats_path is not None:
             stats_path.write_text(json.dumps(stats, indent=2) + "\n")
         return stats

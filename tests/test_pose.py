@@ -72,6 +72,10 @@ def test_repeated_and_too_old_fixes_are_not_applied():
         g.update(T0 + 0.01 * k, (0.01 * k, 0.0, 0.0))
     assert not g.fix(fix(T0 + 0.1, 0.1, 0.0, 0.0))          # before the odometry kept
     assert g.dropped_late == 1 and g.applied == 0 and math.isinf(g.uncertainty)
+    # a source whose clock runs ahead: its fixes would never age, so they are not taken
+    assert not g.fix(fix(T0 + 0.5 + 0.6, 0.5, 0.0, 0.0))
+    assert g.dropped_future == 1 and g.applied == 0
+    assert g.fix(fix(T0 + 0.5 + 0.4, 0.5, 0.0, 0.0))         # ahead, within the timeout
 
 
 # --- the agent on a slipping robot with a simulated motion-capture system -----------------
