@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import subprocess
 import sys
 import time
@@ -104,7 +105,7 @@ def main() -> int:
         sc = out / f"{kind}.toml"
         sc.write_text(scenario(args, kind))
         run = out / kind
-        started = time.monotonic()
+        started, load0 = time.monotonic(), os.getloadavg()[0]
         proc = subprocess.run([sys.executable, "-m", "hil.cli", "sitl", str(sc), "--out",
                                str(run), "--duration", str(args.duration), "--no-live",
                                "--gcs-port", "0"], cwd=ROOT, capture_output=True, text=True)
@@ -117,6 +118,7 @@ def main() -> int:
             continue
         r = m["robot"]
         res = {"exit": proc.returncode, "wall_s": round(time.monotonic() - started, 1),
+               "load_1min": [round(load0, 1), round(os.getloadavg()[0], 1)],
                "pose_error": m["pose_error"], "collisions": m["collisions"],
                "min_pair_distance": m["min_pair_distance"],
                "min_clearance": m.get("min_obstacle_clearance"),
@@ -127,7 +129,8 @@ def main() -> int:
             res["outage"] = outage_figures(run, args, a_max, r["drive_latency"], 0.02)
         results[kind] = res
         p99 = [e["p99"] for e in res["pose_error"].values()]
-        print(f"{kind}: exit {proc.returncode}, {res['wall_s']} s; pose error p99 per robot "
+        print(f"{kind}: exit {proc.returncode}, {res['wall_s']} s (load {res['load_1min']}); "
+              f"pose error p99 per robot "
               f"[m]: " + " ".join(f"{x:.3f}" for x in p99)
               + f"; worst max {max(e['max'] for e in res['pose_error'].values()):.3f} m; "
               f"collisions {res['collisions']}, closest pair "
