@@ -71,6 +71,8 @@ def outage_figures(run: Path, args: argparse.Namespace, a_max: float, latency: f
     if not held.size:
         return {"held": False}
     k = held[0]
+    if me[k - 1, 0] < args.outage_at:
+        return {"held": False, "why": "it stood still already when its fixes stopped"}
     v = abs(me[k - 1, 5])
     rest = me[(me[:, 0] >= me[k, 0] + v / a_max + 1.0)]
     travel = math.hypot(rest[0, 2] - me[k, 2], rest[0, 3] - me[k, 3]) if len(rest) else None
