@@ -33,10 +33,11 @@ from agent.kinematics import TWO_PI, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step, pair_active
 from agent.loop import Clock
 from agent.neighbours import InRange, in_range
-from agent.odometry import Odometry
+from agent.odometry import Odometry, Pose
+from agent.pose import PoseFusion
 from agent.progress import PROGRESS, ProgressWatch, tolerance
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
-from common.ports import MotorPort, SwarmPort
+from common.ports import FixPort, MotorPort, SwarmPort
 from common.schema import ConfigError, Param
 from common.vocabulary import AgentMode, Mode, StateFlags, WheelFeedback
 
@@ -82,7 +83,8 @@ class Agent:
     """The agent of robot ``settings.robot_id`` over its injected ports."""
 
     def __init__(self, settings: AgentSettings, motor: MotorPort, swarm: SwarmPort,
-                 clock: Clock):
+                 clock: Clock, fixes: FixPort | None = None):
+        """``fixes``: the robot's pose fixes, required when ``settings.pose`` is set."""
         self.s = settings
         self._law_params = LawParams.of(settings.control, settings.robot)   # the law's view
         self.motor, self.swarm, self.clock = motor, swarm, clock
@@ -90,6 +92,13 @@ class Agent:
         self.failsafe: str | None = None
         self.odometry = Odometry(settings.robot.wheel_radius, settings.robot.wheel_base,
                                  settings.initial_pose)
+        # with a pose source: odometry fused with its fixes (agent.pose)
+        self.fixes = fixes
+        self.fusion = (PoseFusion(settings.pose, settings.robot.wheel_base)
+                       if settings.pose is not None else None)
+        if self.fusion is not None and fixes is None:
+            raise ValueError("[pose] is configured: the agent needs the port of its fixes")
+        self.pose: Pose = self.odometry.pose   # the estimate the agent acts on
         self.memory = LawMemory()
         self._held: set[int] = set()       # neighbours whose pair was active (law.pair_active)
         self.progress = ProgressWatch(settings.timeouts.deadlock)
@@ -110,10 +119,14 @@ class Agent:
         self._arm_sent = -math.inf
 
     # --- commands (from the process, a ground station or autostart) ---------------------
-    def arm(self) -> None:
+    def arm(self) -> str | None:
         """Clear the drivers' errors and request closed loop (an explicit request); the
         request alone is repeated until both drivers report it (they may boot after the
-        robot computer), for at most ``[timeouts] arm``."""
+        robot computer), for at most ``[timeouts] arm``. Refused (the reason returned)
+        with a pose source whose last fix is missing or too old."""
+        if (why := self.pose_problem()) is not None:
+            log.warning("robot %d: arming refused: %s", self.s.robot_id, why)
+            return f"arming refused: {why}"
         self.motor.clear_errors()
         self.motor.arm()
         self.failsafe = None
@@ -122,6 +135,7 @@ class Agent:
         if self.mode is AgentMode.DISARMED:
             self.mode = AgentMode.HOLD
         log.info("robot %d armed", self.s.robot_id)
+        return None
 
     def disarm(self) -> None:
         self._arming = False
@@ -135,6 +149,8 @@ class Agent:
             return "use disarm to disarm"
         if self.mode is AgentMode.DISARMED:
             return "not armed"
+        if mode is AgentMode.FORMATION and (why := self.pose_problem()) is not None:
+            return why
         self.mode = mode
         if mode is AgentMode.FORMATION:
             self.failsafe = None
@@ -174,7 +190,7 @@ class Agent:
         if fb is not None:
             self.odometry.update(*fb.pos_rev)
         self.last_feedback = fb
-        pose = self.odometry.pose
+        pose = self._estimate(now_w)
         mission = self.swarm.mission()
         # every period whatever the mode: the same work each tick (nothing piles up in the
         # rings until the mission starts, when every agent would drain them at once)
@@ -187,6 +203,7 @@ class Agent:
         self.governed = False
         if self.mode is not AgentMode.DISARMED:
             self._check_feedback(fb, now_m)
+            self._check_fix()
             if self.mode is AgentMode.FORMATION and self.failsafe is None and not self._arming:
                 v, u = self._formation_step(pose, mission, neighbours, detections, now_m,
                                             now_w)
@@ -240,6 +257,38 @@ class Agent:
             reason = "driver feedback lost"
         elif not fresh.closed_loop:
             reason = "drivers not in closed loop control"
+        if reason and self.failsafe is None:
+            self.failsafe = reason
+            self.counters.failsafes += 1
+            if self.mode is AgentMode.FORMATION:
+                self.mode = AgentMode.HOLD
+            log.critical("robot %d failsafe: %s; holding", self.s.robot_id, reason)
+
+    # --- pose source (agent.pose) ---------------------------------------------------------
+    def _estimate(self, now_w: float) -> Pose:
+        """The pose to act on: odometry, corrected by the newest fix when there is a source."""
+        if self.fusion is None or self.fixes is None:
+            self.pose = self.odometry.pose
+            return self.pose
+        self.fusion.update(now_w, self.odometry.pose)
+        if (fix := self.fixes.fix()) is not None:
+            self.fusion.fix(fix)
+        self.pose = self.fusion.pose
+        return self.pose
+
+    def pose_problem(self) -> str | None:
+        """Why the pose is not to be trusted (the source's last fix is missing or older than
+        ``[pose] fix_timeout``), or None (also without a pose source)."""
+        if self.fusion is None or self.s.pose is None:
+            return None
+        age, limit = self.fusion.age(self.clock.wall()), self.s.pose.fix_timeout
+        if math.isinf(age):
+            return "no pose fix yet"
+        return f"pose fix {age:.2f} s old (limit {limit:g} s)" if age > limit else None
+
+    def _check_fix(self) -> None:
+        """Failsafe HOLD when the pose source's fix is missing or too old."""
+        reason = self.pose_problem()
         if reason and self.failsafe is None:
             self.failsafe = reason
             self.counters.failsafes += 1
@@ -330,8 +379,10 @@ class Agent:
         """The safety governor's hazards (agent.governor) around ``pose``: every neighbour
         heard from at its reported position, grown by its data's age, and the detected
         obstacles grown by a (``obs_*`` without their last ``n_stale`` entries: stale
-        robots, which are among the neighbours)."""
+        robots, which are among the neighbours); with a pose source, every radius also grown
+        by this robot's position uncertainty."""
         s = self.s
+        grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
         top = min(s.control.v_max, s.robot.v_wheel_max)
         hx: list[float] = []
         hy: list[float] = []
@@ -347,13 +398,13 @@ class Agent:
             full, half = self._disc(m, age)
             hx.append(m.x)
             hy.append(m.y)
-            hr.append(full)
-            hh.append(half)
+            hr.append(full + grow)
+            hh.append(half + grow)
             hm.append(1.0 if age <= s.timeouts.staleness else 0.0)
         for k in range(len(obs_r) - n_stale):
             hx.append(obs_x[k])
             hy.append(obs_y[k])
-            hr.append(obs_r[k] + s.control.a)
+            hr.append(obs_r[k] + s.control.a + grow)
             hh.append(-math.inf)
             hm.append(0.0)
         return hx, hy, hr, hh, hm

@@ -30,7 +30,14 @@ from common.vocabulary import AgentMode
 from transport.canbus import open_bus
 from transport.mavlink_link import VehicleState, open_link
 from transport.wheel_drivers import WheelDrivers
-from transport.zenoh_link import Keys, SwarmLink, config_from_file, open_session, session_config
+from transport.zenoh_link import (
+    FixLink,
+    Keys,
+    SwarmLink,
+    config_from_file,
+    open_session,
+    session_config,
+)
 
 log = logging.getLogger(__name__)
 
@@ -45,12 +52,11 @@ class AgentVehicle:
 
     def state(self) -> VehicleState:
         a = self.agent
-        x, y, theta = a.odometry.pose
+        x, y, theta = a.pose
         return VehicleState(a.mode, a.failsafe, x, y, theta, *a.command, a.deadlock)
 
     def arm(self) -> str | None:
-        self.agent.arm()
-        return None
+        return self.agent.arm()
 
     def disarm(self) -> str | None:
         self.agent.disarm()
@@ -79,7 +85,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
     rt = (s.realtime_priority if s.realtime_priority > 0
           and use_realtime(max(s.realtime_priority - 1, 1)) else 0)
     bus = open_bus(s.can.interface, s.can.channel, port=s.can.port, bitrate=s.can.bitrate)
-    session = swarm = link = None
+    session = swarm = link = fixes = None
     try:
         motor = WheelDrivers(bus, s.can.left_node, s.can.right_node,
                              vel_limit=s.robot.wheel_speed_limit, clock=clock.monotonic)
@@ -98,21 +104,28 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
             log.critical("robot %d: SIMULATION ONLY: neighbour states pass an impaired link "
                          "(%s); a real robot's config has no [impairment] section",
                          s.robot_id, s.impairment.describe())
-        agent = Agent(s, motor, port, clock)
+        if s.pose is not None:
+            fixes = FixLink(session, Keys(s.swarm), s.robot_id, clock.wall)
+        agent = Agent(s, motor, port, clock, fixes)
         link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
                          clock.wall, params=CONTROL_PARAMS)
         realtime = rt > 0 and use_realtime(rt)
         loop = FixedRateLoop(s.control.period, clock)
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: loop.stop())
-        if s.autostart:
-            agent.arm()
-            agent.set_mode(AgentMode.FORMATION)
+        # autostart arms once the pose can be trusted (at once without a pose source)
+        autostart = [s.autostart]
+        if s.autostart and s.pose is not None:
+            log.info("robot %d: autostart waits for a pose fix", s.robot_id)
         log.info("agent %d running at %g Hz", s.robot_id, 1.0 / s.control.period)
         notifier = Notifier()
         overruns = [0]
 
         def tick(k: int, deadline: float) -> None:
+            if autostart[0] and agent.pose_problem() is None:
+                autostart[0] = False
+                agent.arm()
+                agent.set_mode(AgentMode.FORMATION)
             agent.tick(k, deadline)
             link.poll(clock.monotonic())          # bounded, never blocks
             fb = agent.last_feedback
@@ -138,12 +151,18 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
                  "failsafe": agent.failsafe, "realtime": realtime}
         if impaired is not None:
             stats["impairment"] = impaired.counters()
+        if fixes is not None and agent.fusion is not None:
+            stats["pose"] = {"fixes": fixes.counters(), "applied": agent.fusion.applied,
+                             "dropped_late": agent.fusion.dropped_late,
+                             "dropped_future": agent.fusion.dropped_future}
         if stats_path is not None:
             stats_path.write_text(json.dumps(stats, indent=2) + "\n")
         return stats
     finally:
         if link is not None:
             link.close()
+        if fixes is not None:
+            fixes.close()
         if swarm is not None:
             swarm.close()
         if session is not None:

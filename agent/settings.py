@@ -15,6 +15,8 @@
     [mavlink]                       # transport.settings.MavlinkSettings
     [timeouts]                      # TimeoutSettings: feedback, staleness, arm
     [sensing]                       # SensingSettings: range
+    [pose]                          # agent.pose.PoseSettings, optional: fixes from motion
+                                    # capture fused with odometry (absent: odometry alone)
     [impairment]                    # SIMULATION ONLY, written by `boundswarm sitl`:
                                     # agent.impairment.ImpairmentSettings; refused unless
                                     # the CAN bus is emulated (udp_multicast, virtual, vcan*)
@@ -32,6 +34,7 @@ from pathlib import Path
 
 from agent.config import ControlParams, RobotParams
 from agent.impairment import ImpairmentSettings
+from agent.pose import PoseSettings
 from agent.progress import WINDOW
 from common.schema import ConfigError, from_table, load_toml, section, setting, validate
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
@@ -84,6 +87,9 @@ class AgentSettings:
     timeouts: TimeoutSettings = section(TimeoutSettings, "timeouts")
     sensing: SensingSettings = section(SensingSettings, "sensing")
     mavlink: MavlinkSettings = section(MavlinkSettings, "the MAVLink link")
+    pose: PoseSettings | None = section(
+        PoseSettings, "an external pose source (motion capture) fused with odometry",
+        optional=True)
     impairment: ImpairmentSettings | None = section(
         ImpairmentSettings, "SIMULATION ONLY: impaired neighbour link (boundswarm sitl)",
         optional=True)

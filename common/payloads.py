@@ -19,6 +19,10 @@ followed by the body of its kind:
 * WHEELS (``.../robot/<id>/wheels``, multi-host SITL only): the emulated drivers' wheel
   positions [rev] and actual speeds [rev/s], right then left, 4 x f64, for a world
   simulated on another host.
+* FIX (``.../robot/<id>/fix``, 44 bytes in all): a pose fix of one robot from an external
+  source (motion capture: ``boundswarm mocap``, or the SITL's simulated one): x, y, theta
+  as f64 [m, m, rad] in the world frame, error f32 [m] (the bound on the position's error
+  that the source states, > 0); the header's stamp is the capture time, not the send time.
 * MISSION (``.../mission``): epoch f64 [s, UNIX time], center0 2 x f64 [m], velocity 2 x f32
   [m/s], omega f32 [rad/s], count u16, then count x (robot_id u16, offset_x f32, offset_y f32).
 
@@ -43,6 +47,7 @@ HEADER = struct.Struct("<BBHId")
 STATE_BODY = struct.Struct("<7fBB6x")
 TRUTH_BODY = struct.Struct("<5d")
 WHEELS_BODY = struct.Struct("<4d")
+FIX_BODY = struct.Struct("<3df")
 COUNT = struct.Struct("<H")
 CIRCLE = struct.Struct("<3f")
 MISSION_BODY = struct.Struct("<d2d2ffH")
@@ -55,6 +60,7 @@ class PayloadKind(enum.IntEnum):
     TRUTH = 3
     MISSION = 4
     WHEELS = 5
+    FIX = 6
 
 
 _FLAG_MASK = sum(int(f) for f in StateFlags)
@@ -237,6 +243,33 @@ class WheelsMsg:
     def decode(cls, data: bytes) -> "WheelsMsg":
         h, values = _fixed(data, PayloadKind.WHEELS, WHEELS_BODY, "wheels")
         return cls(h.robot_id, h.seq, h.stamp, *values)
+
+
+@dataclass(frozen=True)
+class FixMsg:
+    """A pose fix of one robot from an external source (motion capture), stamped with its
+    capture time."""
+
+    robot_id: int
+    seq: int
+    stamp: float      # s, UNIX time of the capture
+    x: float          # m, world frame
+    y: float          # m
+    theta: float      # rad
+    error: float      # m, bound on the position's error the source states
+
+    SIZE = HEADER.size + FIX_BODY.size
+
+    def encode(self) -> bytes:
+        return (_pack_header(PayloadKind.FIX, self.robot_id, self.seq, self.stamp)
+                + FIX_BODY.pack(self.x, self.y, self.theta, self.error))
+
+    @classmethod
+    def decode(cls, data: bytes) -> "FixMsg":
+        h, (x, y, theta, error) = _fixed(data, PayloadKind.FIX, FIX_BODY, "fix")
+        if error <= 0.0:
+            raise PayloadError("nonfinite", f"fix error {error:g} m, must be > 0")
+        return cls(h.robot_id, h.seq, h.stamp, x, y, theta, error)
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Mapping, Protocol
 
-from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
+from common.payloads import FixMsg, MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.vocabulary import WheelFeedback
 
 
@@ -29,3 +29,9 @@ class SwarmPort(Protocol):
     def neighbours(self) -> Mapping[int, Received[StateMsg]]: ...
     def obstacles(self) -> ObstaclesMsg | None: ...
     def mission(self) -> MissionMsg | None: ...
+
+
+class FixPort(Protocol):
+    """The robot's pose fixes from an external source (motion capture), when it has one."""
+
+    def fix(self) -> FixMsg | None: ...     # the newest, by capture time; None before any

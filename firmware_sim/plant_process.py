@@ -21,11 +21,12 @@ import time
 from typing import Callable, Iterable
 
 from agent.loop import FixedRateLoop, SystemClock, use_realtime
-from common.payloads import WheelsMsg
+from common.payloads import MissionMsg, WheelsMsg
+from firmware_sim.mocap_sim import SimulatedMocap
 from firmware_sim.odrive_sim import DriverPair
 from firmware_sim.sitl_plant import PlantRobot, SitlPlant
 from transport.canbus import open_bus
-from transport.zenoh_link import Arrivals, Keys, open_session, session_config
+from transport.zenoh_link import Arrivals, Keys, Latest, open_session, session_config
 
 log = logging.getLogger(__name__)
 
@@ -121,15 +122,26 @@ def _scenario_index(scenario) -> dict[int, int]:
 
 def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: float,
                clock: SystemClock, realtime_priority: int = 0) -> dict:
-    """Publish truth and obstacles of ``robots`` while moving them in real time until a
-    signal; the physics steps by the time that really passed (a late tick must not slow the
-    world). Returns the loop statistics."""
+    """Publish truth and obstacles (and, with the scenario's ``[mocap]``, pose fixes) of
+    ``robots`` while moving them in real time until a signal; the physics steps by the time
+    that really passed (a late tick must not slow the world). Returns the loop statistics."""
+    kinds = ("truth", "obstacles") + (("fix",) if scenario.mocap is not None else ())
     publishers = {(kind, rb.robot_id): session.declare_publisher(getattr(keys, kind)(rb.robot_id))
-                  for rb in robots for kind in ("truth", "obstacles")}
+                  for rb in robots for kind in kinds}
+    mocap = mission = None
+    if scenario.mocap is not None:       # its outages count from the mission's epoch
+        mission = Latest(session, keys.mission, MissionMsg.decode, time.time)
+
+        def epoch() -> float | None:
+            got = mission.snapshot().get(0) if mission is not None else None
+            return got.msg.epoch if got else None
+
+        mocap = SimulatedMocap(scenario.mocap,
+                               lambda rid, data: publishers[("fix", rid)].put(data), epoch)
     plant = SitlPlant(robots, scenario.robot, scenario.obstacles, scenario.sensing_range,
                       lambda kind, rid, data: publishers[(kind, rid)].put(data),
                       world=scenario.world, period=scenario.control.period,
-                      index=_scenario_index(scenario))
+                      index=_scenario_index(scenario), mocap=mocap)
     if not scenario.world.ideal:
         log.warning("imperfect world: %s", scenario.world)
     loop = FixedRateLoop(dt, clock)
@@ -144,8 +156,15 @@ def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: floa
         plant.step(step, now, clock.wall())
 
     gc.freeze()           # start-up objects are never scanned again: no long GC pause in a tick
-    loop.run(tick)
-    return loop.stats.summary()
+    try:
+        loop.run(tick)
+    finally:
+        if mission is not None:
+            mission.close()
+    stats = loop.stats.summary()
+    if mocap is not None:
+        stats["mocap"] = {"published": mocap.published, "lost": mocap.lost}
+    return stats
 
 
 def run_world(scenario, swarm: str, conf, dt: float = 0.005, realtime_priority: int = 0

@@ -18,8 +18,9 @@ by half a step's worth of the wheel's speed change since the start: an offset th
 grow with time.
 
 The plant publishes on Zenoh what the real world would give the robot's sensors: obstacle
-detections within sensing range (10 Hz) and, SITL only, the ground truth (every
-``truth_every`` physics steps).
+detections within sensing range (10 Hz), pose fixes of a simulated motion-capture system
+when the scenario has one (:mod:`firmware_sim.mocap_sim`) and, SITL only, the ground truth
+(every ``truth_every`` physics steps).
 
 An imperfect world (:class:`firmware_sim.world.WorldParams`, docs/world.md "In the SITL")
 applies here with the batch simulator's own functions (:mod:`firmware_sim.world_step`):
@@ -43,6 +44,7 @@ import numpy as np
 from agent.config import RobotParams
 from agent.kinematics import TWO_PI, arc_step, body_velocity
 from common.payloads import ObstaclesMsg, TruthMsg
+from firmware_sim.mocap_sim import SimulatedMocap
 from firmware_sim.world import Obstacles, WorldParams
 from firmware_sim.world_step import TIME_EPS, detect, slip_next
 
@@ -94,12 +96,14 @@ class SitlPlant:
                  sensing_range: float, publish: Callable[[str, int, bytes], None],
                  truth_every: int = 2, obstacles_period: float = 0.1,
                  world: WorldParams | None = None, period: float = 0.02,
-                 index: Mapping[int, int] | None = None):
+                 index: Mapping[int, int] | None = None,
+                 mocap: SimulatedMocap | None = None):
         """``truth_every``: publish truth every this many physics steps. ``world``: its wheel
         slip and detection noise and dropout apply (None: the ideal world); ``period`` [s]
         steps the slip (the scenario's control period); ``index`` maps robot ids to their
         indices in the scenario, the keys of the draws (default: their order in
-        ``robots``)."""
+        ``robots``). ``mocap``: captures the robots after every step (None: no pose
+        fixes)."""
         self.robots, self.params, self.obstacles = robots, robot, obstacles
         self.sensing_range, self.publish = sensing_range, publish
         self.truth_every, self.obstacles_period = truth_every, obstacles_period
@@ -107,6 +111,7 @@ class SitlPlant:
         self._seq = 0
         self._next_obstacles = -np.inf
         self.world = world or WorldParams()
+        self.mocap = mocap
         self.period = period
         self._keys = [index[rb.robot_id] if index is not None else j
                       for j, rb in enumerate(robots)]
@@ -153,6 +158,8 @@ class SitlPlant:
             rb.pose = arc_step(*rb.pose, rb.v * dt, rb.u * dt)
         self._time += dt
         self._steps += 1
+        if self.mocap is not None:
+            self.mocap.step(now_w, self.robots)
         if self._steps % self.truth_every == 0:
             self._seq += 1
             for rb in self.robots:

@@ -20,6 +20,7 @@ from hil import (
     deploy_cli,
     generate_cli,
     mission_cli,
+    mocap_cli,
     plant_cli,
     record_cli,
     report_cli,
@@ -30,7 +31,7 @@ from hil import (
 from hil.exit_codes import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, BadInput
 
 SUBCOMMANDS = (sim_cli, sitl_cli, agent_cli, plant_cli, can_cli, deploy_cli, router_cli,
-               mission_cli, record_cli, report_cli, generate_cli, campaign_cli)
+               mission_cli, mocap_cli, record_cli, report_cli, generate_cli, campaign_cli)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -11,19 +11,31 @@ Swarm manifest (TOML, ``version = 1``)::
     port = 7447
     [gcs]
     mavlink = "udpout:192.0.2.10:14550"
+    [mocap]                          # optional: a motion-capture pose source
+    system = "vicon"                 # hil.mocap.SYSTEMS
+    hostname = "192.0.2.20"          # the motion-capture server
+    options = []                     # further connect options, key=value
+    error = 0.005                    # m, each fix's position error bound
+    latency = 0.0                    # s, capture to arrival at the ground station
+    fix_timeout = 0.5                # s, the robots' [pose] fix_timeout
     [[robots]]
     id = 1
     host = "robot-1.local"           # name or address of the robot computer
     can_interface = "can0"
     bitrate = 500000
+    rigid_body = "robot-1"           # its name in the motion-capture system (default)
+
+A complete example: examples/swarm.toml.
 
 ``boundswarm deploy MANIFEST --out DIR`` writes ``DIR/robot-<id>/`` for each robot (agent
 config, Zenoh client config with mutual TLS, the robot's certificate and private key, the
 CA certificate, a MAVLink signing key, a systemd unit whose documentation is the bundle's
 README (installed with it), an install script, the project's wheel) and ``DIR/ground/``
 (the router's config with TLS and access control, its certificate and key, the CA, the
-scenario, notes for the ground-control station). The access-control rules let each robot
-publish only under its own keys.
+scenario, notes for the ground-control station and, with ``[mocap]``, the motion-capture
+bridge's config ``mocap.toml``; the robots' agent configs then have a ``[pose]`` table). The
+access-control rules let each robot publish only under its own keys; the ground station
+publishes the fixes.
 """
 from __future__ import annotations
 
@@ -32,12 +44,15 @@ import secrets
 import shutil
 import subprocess
 import sys
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
+from agent.pose import PoseSettings
 from agent.settings import AgentSettings, SensingSettings
-from common.schema import TableReader, load_toml, to_toml
+from common.schema import ConfigError, TableReader, from_table, load_toml, to_toml
 from hil.certs import SwarmCA, write_private
+from hil.mocap import MocapSettings
 from hil.scenario import load_scenario
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 
@@ -56,6 +71,7 @@ class RobotEntry:
     host: str
     can_interface: str
     bitrate: int
+    rigid_body: str = ""          # its name in the motion-capture system
 
 
 @dataclass(frozen=True)
@@ -67,13 +83,16 @@ class SwarmManifest:
     router_port: int
     mavlink: str
     robots: tuple[RobotEntry, ...]
+    mocap: MocapSettings | None = None    # the ground station's bridge (ground client)
+    pose: PoseSettings | None = None      # the robots' [pose] with a motion-capture system
 
 
 def load_manifest(path: str | Path) -> SwarmManifest:
     path = Path(path)
     doc = load_toml(path, "swarm manifest", DeployError)
     rd = TableReader(str(path), DeployError)
-    rd.only(doc, {"version", "swarm", "scenario", "router", "gcs", "robots"}, "top level")
+    rd.only(doc, {"version", "swarm", "scenario", "router", "gcs", "robots", "mocap"},
+            "top level")
     if rd.integer(doc, "version", "version") != 1:
         raise rd.fail("version", f"this boundswarm reads version 1, got {doc['version']}")
     router = rd.table(doc, "router")
@@ -83,21 +102,48 @@ def load_manifest(path: str | Path) -> SwarmManifest:
     robots = []
     for i, r in enumerate(rd.array_of_tables(doc, "robots", required=True)):
         f = f"robots[{i}]"
-        rd.only(r, {"id", "host", "can_interface", "bitrate"}, f)
-        robots.append(RobotEntry(rd.integer(r, "id", f"{f}.id", lo=1, hi=255),
-                                 rd.string(r, "host", f"{f}.host"),
+        rd.only(r, {"id", "host", "can_interface", "bitrate", "rigid_body"}, f)
+        rid = rd.integer(r, "id", f"{f}.id", lo=1, hi=255)
+        robots.append(RobotEntry(rid, rd.string(r, "host", f"{f}.host"),
                                  rd.string(r, "can_interface", f"{f}.can_interface", "can0"),
                                  rd.integer(r, "bitrate", f"{f}.bitrate", 500_000,
-                                            lo=10_000, hi=1_000_000)))
+                                            lo=10_000, hi=1_000_000),
+                                 rd.string(r, "rigid_body", f"{f}.rigid_body", f"robot-{rid}")))
     ids = [r.id for r in robots]
     if len(set(ids)) != len(ids):
         raise rd.fail("robots", f"duplicate robot ids in {ids}")
     scenario = (path.parent / rd.string(doc, "scenario", "scenario")).resolve()
-    return SwarmManifest(path, rd.string(doc, "swarm", "swarm"), scenario,
+    swarm = rd.string(doc, "swarm", "swarm")
+    mocap = pose = None
+    if "mocap" in doc:
+        mocap, pose = _mocap(rd.table(doc, "mocap"), swarm, robots, f"{path} [mocap]")
+    return SwarmManifest(path, swarm, scenario,
                          rd.string(router, "address", "[router] address"),
                          rd.integer(router, "port", "[router] port", 7447, lo=1, hi=65535),
                          rd.string(gcs, "mavlink", "[gcs] mavlink", MavlinkSettings.url),
-                         tuple(robots))
+                         tuple(robots), mocap, pose)
+
+
+MOCAP_KEYS = {"system", "hostname", "options", "error", "latency"}
+
+
+def _mocap(table: dict, swarm: str, robots: list[RobotEntry], where: str
+           ) -> tuple[MocapSettings, PoseSettings]:
+    """The bridge's settings (the ground client's session, each robot's rigid body) and the
+    robots' [pose] from the manifest's ``[mocap]`` table."""
+    unknown = sorted(set(table) - MOCAP_KEYS - {"fix_timeout"})
+    if unknown:
+        raise DeployError(f"{where}: unknown field(s) {', '.join(unknown)}; allowed: "
+                          f"{', '.join(sorted(MOCAP_KEYS | {'fix_timeout'}))}")
+    bridge = {k: v for k, v in table.items() if k in MOCAP_KEYS}
+    bridge.update(swarm=swarm, zenoh={"config": "ground-client.json5"},
+                  bodies=[{"name": r.rigid_body, "robot": r.id} for r in robots])
+    pose = {"fix_timeout": table["fix_timeout"]} if "fix_timeout" in table else {}
+    try:
+        return (from_table(MocapSettings, bridge, where),
+                from_table(PoseSettings, pose, where))
+    except ConfigError as exc:
+        raise DeployError(str(exc)) from None
 
 
 def _tls(prefix: str, cn: str, mode: str) -> dict:
@@ -237,7 +283,9 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
     for r in manifest.robots:
         keys[r.id] = secrets.token_bytes(32)
         write_private(ground / f"mavlink-robot-{r.id}.key", keys[r.id])
-    (ground / "README.md").write_text(_ground_notes(manifest))
+    if manifest.mocap is not None:
+        (ground / "mocap.toml").write_text(to_toml(manifest.mocap))
+    (ground / "README.md").write_text(_ground_notes(manifest, wheel.name))
     bundles["ground"] = ground
 
     for r in manifest.robots:
@@ -261,7 +309,8 @@ def deploy(manifest: SwarmManifest, out: Path, wheel: Path | None = None,
             zenoh=ZenohSettings(mode="client", connect=(), config="zenoh.json5"),
             autostart=True, sensing=SensingSettings(sc.sensing_range),
             realtime_priority=REALTIME_PRIORITY,
-            mavlink=MavlinkSettings(url=manifest.mavlink, signing_key_file="mavlink.key"))
+            mavlink=MavlinkSettings(url=manifest.mavlink, signing_key_file="mavlink.key"),
+            pose=manifest.pose)
         (b / "agent.toml").write_text(to_toml(settings))
         (b / "boundswarm-agent.service").write_text(UNIT.format(
             id=r.id, etc=etc, prefix=prefix, can=r.can_interface, bitrate=r.bitrate,
@@ -294,14 +343,40 @@ project's README describe the rest.
 """
 
 
-def _ground_notes(m: SwarmManifest) -> str:
+def _mocap_notes(m: SwarmManifest, wheel: str) -> str:
+    """The ground notes' motion-capture step ('' without a motion-capture system)."""
+    if m.mocap is None or m.pose is None:
+        return ""
+    where = f" at {m.mocap.hostname}" if m.mocap.hostname else ""
+    bodies = ", ".join(f"{b.name} -> robot {b.robot}" for b in m.mocap.bodies)
+    text = textwrap.fill(f"Motion capture: each robot's pose comes from the {m.mocap.system} "
+                         f"system{where} (rigid bodies {bodies}). Install boundswarm with its "
+                         f"mocap extra on this computer, e.g. pip install "
+                         f"\"../wheels/{wheel}[mocap]\", then, with the router up:",
+                         width=88, initial_indent="   ", subsequent_indent="   ")
+    after = textwrap.fill(f"The robots refuse to arm without a fix and hold when their fix is "
+                          f"older than {m.pose.fix_timeout:g} s: start the bridge before the "
+                          f"robots, keep this computer's and the robots' clocks in sync "
+                          f"(chrony or PTP: a fix is stamped with its capture time), and "
+                          f"watch its warnings about rigid bodies it does not see.",
+                          width=88, initial_indent="   ", subsequent_indent="   ")
+    return f"""
+{text}
+
+       boundswarm mocap --config mocap.toml
+
+{after}
+"""
+
+
+def _ground_notes(m: SwarmManifest, wheel: str) -> str:
     return f"""# Ground station of swarm "{m.swarm}"
 
 1. Router (Zenoh, mutual TLS, access control; robots connect to
    tls/{m.router_address}:{m.router_port}):
 
        boundswarm router --config router.json5
-
+{_mocap_notes(m, wheel)}
 2. Start the mission when every robot is alive (the epoch is shared by all agents; keep
    the clocks of all computers in sync, e.g. with chrony):
 

@@ -23,13 +23,13 @@ import zenoh
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from common.payloads import MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg
+from common.payloads import FixMsg, MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg
 from transport.zenoh_link import Keys
 
 log = logging.getLogger(__name__)
 
 MESSAGES = {"state": StateMsg, "truth": TruthMsg, "obstacles": ObstaclesMsg,
-            "mission": MissionMsg}
+            "mission": MissionMsg, "fix": FixMsg}
 
 
 def _kind(key: str) -> str:
@@ -71,7 +71,8 @@ def _numbers_json(cls) -> Callable[[bytes], tuple[bytes, float]]:
 
 ENCODERS: dict[str, Callable[[bytes], tuple[bytes, float]]] = {
     "state": _numbers_json(StateMsg), "truth": _numbers_json(TruthMsg),
-    "obstacles": _any_json(ObstaclesMsg), "mission": _any_json(MissionMsg)}
+    "obstacles": _any_json(ObstaclesMsg), "mission": _any_json(MissionMsg),
+    "fix": _numbers_json(FixMsg)}
 
 
 def _schema(kind: str) -> bytes:
@@ -105,7 +106,8 @@ class Recorder:
         self._closed = False
         self._stop = threading.Event()
         subscribe = {"state": keys.state("*"), "truth": keys.truth("*"),
-                     "obstacles": keys.obstacles("*"), "mission": keys.mission}
+                     "obstacles": keys.obstacles("*"), "mission": keys.mission,
+                     "fix": keys.fix("*")}
         self._subs = [session.declare_subscriber(key, zenoh.handlers.FifoChannel(capacity))
                       for key in subscribe.values()]
         self._handlers = [(kind, sub.handler) for kind, sub in zip(subscribe, self._subs)]

@@ -11,6 +11,8 @@ Format (every field, with its unit and default, in docs/formats.md)::
     [[robots]]                      # id, pose = [x, y, theta], in formation order
     [[obstacles]]                   # center = [x, y], radius
     [world]                         # firmware_sim.world.WorldParams, optional (ideal)
+    [mocap]                         # firmware_sim.mocap_sim.MocapParams, optional: SITL
+                                    # pose fixes (absent: the agents have odometry alone)
 
 Every problem is reported as :class:`ScenarioError` naming the file and the field.
 """
@@ -25,6 +27,7 @@ import numpy as np
 from agent.config import ControlParams, RobotParams
 from agent.formation import Formation, FormationKind, formation_offsets
 from common.schema import ConfigError, TableReader, from_table, load_toml
+from firmware_sim.mocap_sim import MocapParams
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles, WorldParams
 
@@ -49,10 +52,11 @@ class Scenario:
     world: WorldParams = WorldParams()
     source: Path | None = None
     robot_given: bool = False   # the file has a [robot] table (else RobotParams' defaults)
+    mocap: MocapParams | None = None   # SITL: a simulated motion-capture system
 
 
 TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles",
-            "world"}
+            "world", "mocap"}
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -74,6 +78,8 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
         control = from_table(ControlParams, rd.table(doc, "control"), f"{where} [control]")
         robot = from_table(RobotParams, rd.table(doc, "robot"), f"{where} [robot]")
         world = from_table(WorldParams, rd.table(doc, "world"), f"{where} [world]")
+        mocap = (from_table(MocapParams, rd.table(doc, "mocap"), f"{where} [mocap]")
+                 if "mocap" in doc else None)
     except ConfigError as exc:
         raise ScenarioError(str(exc)) from None
 
@@ -93,6 +99,9 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
     for i, kill in enumerate(world.kill):
         if kill.robot not in ids:
             raise rd.fail(f"[world.kill][{i}].robot", f"no robot {kill.robot} in [[robots]]")
+    for i, out in enumerate(mocap.outage if mocap is not None else ()):
+        if out.robot not in ids:
+            raise rd.fail(f"[mocap.outage][{i}].robot", f"no robot {out.robot} in [[robots]]")
     formation = _formation(rd, rd.table(doc, "formation"), len(ids), control)
 
     obs = rd.array_of_tables(doc, "obstacles", required=False)
@@ -125,7 +134,7 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
                     formation=formation, ids=np.array(ids, dtype=int),
                     poses=np.array(poses, dtype=float), obstacles=obstacles,
                     sensing_range=sensing, substeps=substeps, plant=plant, world=world,
-                    source=source, robot_given="robot" in doc)
+                    source=source, robot_given="robot" in doc, mocap=mocap)
 
 
 def _formation(rd: TableReader, table: dict, n: int, control: ControlParams) -> Formation:

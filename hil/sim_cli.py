@@ -53,6 +53,9 @@ def run(args: argparse.Namespace, console: Console) -> int:
                          sensing_range=sc.sensing_range,
                          substeps=args.substeps or sc.substeps, plant=plant,
                          record_every=args.record_every)
+    if sc.mocap is not None:
+        console.print("[yellow]note: the scenario's \\[mocap] (simulated motion capture) "
+                      "is for sitl; sim does not model it[/yellow]")
     if options.plant is PlantKind.WHEELS:
         console.print(speed_envelope(sc.control, sc.robot, sc.sensing_range,
                                      sc.world.link_delay + sc.control.period).describe())

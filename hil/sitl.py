@@ -18,6 +18,8 @@ spoils the encoders and detections; the agents' configs get an ``[impairment]`` 
 (simulation only) for the link's delay, jitter and loss; and each ``[[world.kill]]`` is done
 here: at mission epoch + ``at`` (this process's clock) the robot's agent is sent SIGKILL by
 PID, a planned death that is recorded in ``SitlRun.killed``, not reported as a lost process.
+The scenario's ``[mocap]`` (firmware_sim.mocap_sim): the plant publishes pose fixes and the
+agents' configs get a ``[pose]`` table; they arm once their first fix is in.
 """
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ from rich.live import Live
 from rich.table import Table
 
 from agent.impairment import ImpairmentSettings
+from agent.pose import PoseSettings
 from agent.settings import AgentSettings, SensingSettings, TimeoutSettings
 from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
@@ -136,7 +139,9 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
                          realtime_priority=opts.realtime_priority,
                          mavlink=MavlinkSettings(url=f"udpout:127.0.0.1:{mavlink_port}",
                                                  signing_key_file=opts.mavlink_key),
-                         impairment=impairment)
+                         impairment=impairment,
+                         pose=(PoseSettings(fix_timeout=sc.mocap.fix_timeout)
+                               if sc.mocap is not None else None))
 
 
 def _status_table(sc: Scenario, states: Mapping[int, Received[StateMsg]],

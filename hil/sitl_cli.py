@@ -108,12 +108,19 @@ def run(args: argparse.Namespace, console: Console) -> int:
     metrics = result.summary(sc.name, sc.duration)
     metrics["robot"] = dataclasses.asdict(sc.robot)
     metrics["world"] = dataclasses.asdict(sc.world)
+    metrics["mocap"] = dataclasses.asdict(sc.mocap) if sc.mocap is not None else None
+    metrics["pose_error"] = extra["pose_error"]
     metrics["sitl"] = _sitl_metrics(swarm, extra["epoch"], sc.duration,
                                     time.perf_counter() - started)
     run_folder.write_run(out, metrics, data, sc.source.read_text() if sc.source else None)
     draw_figures(data, sc.obstacles, sc.control.a, sc.control.b, out / run_folder.FIGURES)
     console.print(summary_table(metrics, f"SITL {sc.name}: {len(sc.ids)} agents"))
     console.print(f"world: {describe_world(sc.world)}")
+    worst = max(metrics["pose_error"].items(), key=lambda kv: kv[1]["p99"])
+    console.print(f"pose error (agent's belief vs truth) p99: worst {worst[1]['p99']:.3f} m "
+                  f"(robot {worst[0]}), max {metrics['max_pose_error']:.3f} m; pose source: "
+                  + (f"simulated motion capture at {sc.mocap.rate:g} Hz" if sc.mocap
+                     else "odometry alone"))
     s = metrics["sitl"]
     console.print(f"deadline misses: {s['deadline_misses_in_mission']} in the mission, "
                   f"{s['deadline_misses']} in all (start-up included), watchdog trips: "

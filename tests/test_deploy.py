@@ -325,3 +325,48 @@ def test_a_replayed_state_payload_is_dropped_by_the_neighbours(bundles, router):
         two.close()
         r1.close()
         r2.close()
+
+
+def test_the_example_manifest_deploys_with_its_motion_capture_bridge(tmp_path):
+    from agent.pose import PoseSettings
+    from agent.settings import load_settings
+    from hil.mocap import load_mocap_settings
+    made = deploy(load_manifest(ROOT / "examples" / "swarm.toml"), tmp_path,
+                  wheel=ROOT / "README.md")
+    assert set(made) == {"ground"} | {f"robot-{i}" for i in range(1, 10)}
+    bridge = load_mocap_settings(tmp_path / "ground" / "mocap.toml")
+    assert bridge.swarm == "field" and bridge.system == "vicon"
+    assert bridge.hostname == "192.0.2.20" and bridge.error == 0.005
+    assert [(b.name, b.robot) for b in bridge.bodies] == [(f"cart{i}", i) for i in range(1, 10)]
+    assert bridge.zenoh.config == str(tmp_path / "ground" / "ground-client.json5")
+    agent = load_settings(tmp_path / "robot-4" / "agent.toml")
+    assert agent.pose == PoseSettings(fix_timeout=0.5) and agent.robot_id == 4
+    notes = (tmp_path / "ground" / "README.md").read_text()
+    assert "boundswarm mocap --config mocap.toml" in notes and "cart4 -> robot 4" in notes
+    assert "README.md[mocap]" in notes                     # the bundled wheel, its extra
+
+
+def test_without_mocap_no_bridge_and_no_pose_table(bundles):
+    out = bundles["out"]
+    assert not (out / "ground" / "mocap.toml").exists()
+    assert "[pose]" not in (out / "robot-1" / "agent.toml").read_text()
+    assert "boundswarm mocap" not in (out / "ground" / "README.md").read_text()
+
+
+def test_mocap_table_errors_name_the_field(tmp_path):
+    good = MANIFEST.format(scenario=ROOT / "scenarios" / "sitl_small.toml", port=7447)
+    mocap = '[mocap]\nsystem = "vicon"\nhostname = "10.0.0.2"\n'
+    at = good.index("[[robots]]")
+    for bad, field in [(mocap + "rate = 100\n", r"m.toml \[mocap\]: unknown field\(s\) rate"),
+                       (mocap.replace("vicon", "kinect"), r"\[mocap\]: MocapSettings.system"),
+                       (mocap + "fix_timeout = 0\n", r"\[mocap\]: PoseSettings.fix_timeout"),
+                       ('[mocap]\nsystem = "qualisys"\n', "MocapSettings.hostname: missing")]:
+        path = tmp_path / "m.toml"
+        path.write_text(good[:at] + bad + good[at:])
+        with pytest.raises(DeployError, match=field):
+            load_manifest(path)
+    path = tmp_path / "m.toml"
+    path.write_text(good[:at] + mocap + good[at:].replace(
+        'can_interface = "can0"', 'can_interface = "can0"\nrigid_body = "robot-2"'))
+    with pytest.raises(DeployError, match=r"bodies: name given twice: \['robot-2'\]"):
+        load_manifest(path)

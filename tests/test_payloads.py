@@ -6,7 +6,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from common.payloads import HEADER, MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg
+from common.payloads import (
+    HEADER,
+    FixMsg,
+    MissionMsg,
+    ObstaclesMsg,
+    PayloadError,
+    StateMsg,
+    TruthMsg,
+)
 from common.vocabulary import StateFlags
 
 STATE = StateMsg(robot_id=3, seq=7, stamp=1_700_000_000.25, x=1.5, y=-2.0, theta=0.5,
@@ -71,9 +79,27 @@ def test_truth_and_mission_round_trip():
         MissionMsg.decode(t.encode())
 
 
+def test_fix_round_trip_and_refusals():
+    f = FixMsg(3, 7, 1.7e9, 1.5, -2.25, 3.0, 0.004)
+    data = f.encode()
+    assert len(data) == FixMsg.SIZE == 44
+    back = FixMsg.decode(data)
+    assert (back.robot_id, back.seq, back.stamp, back.x, back.y, back.theta) == (
+        3, 7, 1.7e9, 1.5, -2.25, 3.0)
+    assert back.error == pytest.approx(0.004)
+    with pytest.raises(PayloadError, match="size"):
+        FixMsg.decode(data[:-1])
+    with pytest.raises(PayloadError, match="kind"):
+        FixMsg.decode(TruthMsg(4, 9, 5.0, 1.0, 2.0, 3.0, 4.0, 5.0).encode())
+    with pytest.raises(PayloadError, match="nonfinite"):
+        FixMsg.decode(FixMsg(3, 7, 1.0, float("nan"), 0.0, 0.0, 0.01).encode())
+    with pytest.raises(PayloadError, match="error"):
+        FixMsg.decode(FixMsg(3, 7, 1.0, 0.0, 0.0, 0.0, 0.0).encode())
+
+
 @given(st.binary(max_size=80))
 def test_random_bytes_never_crash(data):
-    for cls in (StateMsg, ObstaclesMsg, TruthMsg, MissionMsg):
+    for cls in (StateMsg, ObstaclesMsg, TruthMsg, MissionMsg, FixMsg):
         try:
             cls.decode(data)
         except PayloadError:

@@ -8,6 +8,7 @@ Key space (prefix ``boundswarm/<swarm>``)::
     robot/<id>/obstacles   obstacle detections for that robot (ObstaclesMsg)
     robot/<id>/truth       ground truth pose, SITL only (TruthMsg)
     robot/<id>/wheels      emulated drivers' wheel speeds, multi-host SITL only (WheelsMsg)
+    robot/<id>/fix         pose fix from motion capture or the SITL's simulated one (FixMsg)
     mission                formation and epoch (MissionMsg)
 
 Receiving never blocks the control loop: samples wait in bounded rings filled by zenoh's
@@ -34,7 +35,14 @@ from typing import Any, Callable, Generic, Iterable, Mapping, TypeVar
 
 import zenoh
 
-from common.payloads import MissionMsg, ObstaclesMsg, PayloadError, Received, StateMsg
+from common.payloads import (
+    FixMsg,
+    MissionMsg,
+    ObstaclesMsg,
+    PayloadError,
+    Received,
+    StateMsg,
+)
 
 log = logging.getLogger(__name__)
 
@@ -119,6 +127,9 @@ class Keys:
 
     def wheels(self, robot_id: int | str) -> str:
         return f"{self.prefix}/robot/{robot_id}/wheels"
+
+    def fix(self, robot_id: int | str) -> str:
+        return f"{self.prefix}/robot/{robot_id}/fix"
 
     @property
     def mission(self) -> str:
@@ -463,3 +474,22 @@ class SwarmLink:
             sub.close()
         self._pub.undeclare()
         self._beacon.undeclare()
+
+
+class FixLink:
+    """The pose fixes of one robot (common.ports.FixPort): the newest by capture stamp."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
+                 clock: Callable[[], float]):
+        self.robot_id = robot_id
+        self._fixes = Latest(session, keys.fix(robot_id), FixMsg.decode, clock, capacity=64)
+
+    def fix(self) -> FixMsg | None:
+        got = self._fixes.snapshot().get(self.robot_id)
+        return got.msg if got else None
+
+    def counters(self) -> dict:
+        return self._fixes.counters()
+
+    def close(self) -> None:
+        self._fixes.close()
