@@ -1,4 +1,5 @@
 """Closed-loop tests of the batch simulator on simulated time (deterministic)."""
+import dataclasses
 import math
 from pathlib import Path
 
@@ -39,6 +40,15 @@ def test_paper_example():
     # robots trail their references by |p_d_dot|/K = 0.5 m in steady state
     assert m["final_max_tracking_error"] == pytest.approx(0.5, abs=0.01)
     assert {1, 2} <= set(np.unique(res.mode))           # obstacles were avoided/passed
+
+
+def test_paper_example_under_the_paper_law():
+    """law = "paper" (no sidestep, hysteresis per robot) reproduces the same figures."""
+    sc = load_scenario(SCENARIOS / "paper.toml")
+    sc = dataclasses.replace(sc, control=dataclasses.replace(sc.control, law="paper"))
+    _, m = run(sc)
+    assert m["convergence_time"] == pytest.approx(7.32)
+    assert round(m["min_pair_distance"], 4) == 1.9707
 
 
 def test_paper_example_with_wheel_limits():
