@@ -6,8 +6,8 @@ TOLERANCE_MARGIN) and shed less than PROGRESS of its tracking error over the las
 has no feed-forward of the reference's velocity, so a converged robot trails it by
 |p_d_dot| / K (docs/controller.md, E9). The batch simulator's ``deadlocked`` metric
 (:mod:`firmware_sim.metrics`) applies the same rule at the end of a run. Once deadlocked, a
-robot stays so until it is within tolerance or PROGRESS closer than when it became
-deadlocked (a robot jostled back and forth does not flip the verdict).
+robot stays so until it is within tolerance or sheds twice PROGRESS over a window: a robot
+jostled back and forth, or creeping at the threshold, does not flip the verdict.
 """
 from __future__ import annotations
 
@@ -31,7 +31,6 @@ class ProgressWatch:
     def __init__(self, window: float = WINDOW):
         self.window = window                                  # s
         self.deadlocked = False
-        self._since = 0.0                                     # m, error when it became so
         self._errors: deque[tuple[float, float]] = deque()   # (t [s], error [m]), 1 per s
 
     def reset(self) -> None:
@@ -48,8 +47,9 @@ class ProgressWatch:
         while len(self._errors) > 1 and self._errors[1][0] <= t - self.window:
             self._errors.popleft()
         t0, then = self._errors[0]
+        full = t0 <= t - self.window
         if self.deadlocked:
-            self.deadlocked = error > tol and error > self._since - PROGRESS
-        elif t0 <= t - self.window and error > tol and error > then - PROGRESS:
-            self.deadlocked, self._since = True, error
+            self.deadlocked = error > tol and not (full and error < then - 2.0 * PROGRESS)
+        else:
+            self.deadlocked = full and error > tol and error > then - PROGRESS
         return self.deadlocked

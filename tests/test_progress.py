@@ -65,8 +65,10 @@ def test_two_robots_sent_to_one_place_report_their_deadlock():
     assert not any(m.flags & StateFlags.DEADLOCKED for m in alone.swarm.published)
 
 
-def test_a_jostled_robot_stays_deadlocked_until_it_gets_closer():
+def test_a_jostled_or_creeping_robot_stays_deadlocked_until_it_moves_on():
     watch = ProgressWatch(10.0)
     assert feed(watch, (12.0, lambda t: 5.0))[-1]
     assert all(watch.update(12.0 + k, 5.0 + (0.4 if k % 2 else -0.4), 0.75) for k in range(20))
-    assert not watch.update(40.0, 4.4, 0.75)
+    creep = 0.9 * PROGRESS / 10.0                    # m/s, just short of progress
+    assert all(watch.update(32.0 + k, 5.0 - creep * k, 0.75) for k in range(40))
+    assert not watch.update(80.0, 5.0 - creep * 40 - 1.5, 0.75)   # on its way at last
