@@ -383,24 +383,26 @@ class Agent:
         by this robot's position uncertainty."""
         s = self.s
         grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
-        top = min(s.control.v_max, s.robot.v_wheel_max)
+        half_base, disc = self._disc_args()
+        staleness = s.timeouts.staleness
         hx: list[float] = []
         hy: list[float] = []
         hr: list[float] = []
         hh: list[float] = []
         hm: list[float] = []
-        reach = s.sensing_range + top * s.timeouts.staleness
+        x, y, me = pose[0], pose[1], s.robot_id
+        reach = s.sensing_range + disc[2] * staleness
         for rid, rec in neighbours.items():
             m = rec.msg
-            if rid == s.robot_id or math.hypot(m.x - pose[0], m.y - pose[1]) > reach:
+            if rid == me or math.hypot(m.x - x, m.y - y) > reach:
                 continue
             age = now_w - m.stamp
-            full, half = self._disc(m, age)
+            full, half = neighbour_hazard(m.v, half_base * m.u, age, *disc)
             hx.append(m.x)
             hy.append(m.y)
             hr.append(full + grow)
             hh.append(half + grow)
-            hm.append(1.0 if age <= s.timeouts.staleness else 0.0)
+            hm.append(1.0 if age <= staleness else 0.0)
         for k in range(len(obs_r) - n_stale):
             hx.append(obs_x[k])
             hy.append(obs_y[k])
@@ -409,13 +411,13 @@ class Agent:
             hm.append(0.0)
         return hx, hy, hr, hh, hm
 
-    def _disc(self, m: StateMsg, age: float) -> tuple[float, float]:
-        """The governor's exclusion radii [m] (full, half) around neighbour state ``m``
-        of age ``age`` [s] (agent.governor.neighbour_hazard)."""
+    def _disc_args(self) -> tuple[float, tuple[float, float, float, float, float, float]]:
+        """(half the wheel base [m], the arguments of agent.governor.neighbour_hazard after
+        (speed, turn, age)): a, accel, top speed, staleness, sharing age, stop time."""
         s, r = self.s, self.s.robot
-        return neighbour_hazard(m.v, 0.5 * m.u * r.wheel_base, age, s.control.a, r.a_max,
-                                min(s.control.v_max, r.v_wheel_max), s.timeouts.staleness,
-                                s.control.share_age, r.watchdog_timeout + r.drive_latency)
+        return 0.5 * r.wheel_base, (s.control.a, r.a_max, min(s.control.v_max, r.v_wheel_max),
+                                    s.timeouts.staleness, s.control.share_age,
+                                    r.watchdog_timeout + r.drive_latency)
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],
@@ -433,9 +435,11 @@ class Agent:
         obs_x += near.stale_x
         obs_y += near.stale_y
         a = self.s.control.a
+        half_base, disc = self._disc_args()
         for rid in near.stale_id:
             m = neighbours[rid].msg
-            obs_r.append(max(a / 2, self._disc(m, now_w - m.stamp)[0] - a))
+            full, _ = neighbour_hazard(m.v, half_base * m.u, now_w - m.stamp, *disc)
+            obs_r.append(max(a / 2, full - a))
         return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:
