@@ -67,11 +67,11 @@ def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: flo
         grow = min(grow, speed * age + 0.5 * accel * age * age)
         now = min(now, speed + accel * age)
         turn_now = turn + accel * age       # each wheel's speed changes at most accel
+    if age <= share_age and not silent:
+        return -math.inf, a + grow
     full = a + grow + stopping(now, accel, stop_time, turn_now)
     if silent:
         return full, -math.inf
-    if age <= share_age:
-        return -math.inf, a + grow
     return full, a + grow
 
 
