@@ -46,6 +46,7 @@ class InRange:
     stale_x: list[float] = field(default_factory=list)  # at their last position
     stale_y: list[float] = field(default_factory=list)
     ages: list[float] = field(default_factory=list)  # s, now - stamp of each fresh one
+    fresh: list[int] = field(default_factory=list)   # index of each fresh one in the input
 
 
 def extrapolate(x: float, y: float, theta: float, v: float, u: float, age: float,
@@ -70,7 +71,7 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
     as age 0.
     """
     out = InRange()
-    for m in states:
+    for i, m in enumerate(states):
         age = now - m.stamp
         px, py, stale = extrapolate(m.x, m.y, m.theta, m.v, m.u, age, staleness)
         if math.hypot(px - x, py - y) <= reach:
@@ -81,4 +82,5 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
                 out.fresh_x.append(px)
                 out.fresh_y.append(py)
                 out.ages.append(age)
+                out.fresh.append(i)
     return out

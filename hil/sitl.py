@@ -1,12 +1,13 @@
 """The one-command SITL swarm: router, plant, one agent process per robot, recording.
 
-Sequence: open the Zenoh router in this process (loopback endpoint, scouting off) and start
-recording; write each robot's agent config and the run manifest; start the plant process(es)
-(emulated drivers on one CAN bus per robot, robot motion, truth and obstacle detections) and
-wait for truth from every robot; start the agents and wait for every liveliness token;
-publish the mission with an epoch a little in the future; watch the run (progress, live
-status table, lost processes); then end every child (agents first: zero velocity, IDLE) and
-turn the recording into the same run folder as ``sim``, plus loop timing, neighbour-state age
+Sequence: start the Zenoh router in a process of its own (loopback endpoint, scouting off;
+hil.sitl_launch), connect to it and start recording; write each robot's agent config and the
+run manifest; start the plant process(es) (emulated drivers on one CAN bus per robot, robot
+motion, truth and obstacle detections) and wait for truth from every robot; start the agents
+and wait for every liveliness token; publish the mission with an epoch a little in the
+future; watch the run (progress, live status table, lost processes); then end every child
+(agents first: zero velocity, IDLE; the router once the recording has settled) and turn the
+recording into the same run folder as ``sim``, plus loop timing, neighbour-state age
 and watchdog trips.
 
 A plant that dies ends the run at once; an agent that dies is reported and the run goes on
@@ -47,6 +48,7 @@ from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
 from hil.scenario import Scenario
+from hil.sitl_launch import LaunchSettings, start_router, zenoh_runtime
 from transport.canbus import DEFAULT_GROUP
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
@@ -55,12 +57,11 @@ log = logging.getLogger(__name__)
 
 MODE_NAMES = {0: "TRACK", 1: "AVOID", 2: "ROTATE"}
 
-# Zenoh's runtime for the processes of a SITL swarm (zenoh-runtime's ZENOH_RUNTIME syntax):
-# one thread instead of five or six. Dozens of processes on a few cores then spend
-# less CPU handing each message between threads (30 robots: neighbour-state age p99 25 ms
-# instead of 44 in an A/B pair of runs). A ZENOH_RUNTIME in the launcher's environment wins.
-ZENOH_RUNTIME = ("(rx: (worker_threads: 1), app: (handover: rx), tx: (handover: rx), "
-                 "acc: (handover: rx), net: (handover: rx))")
+# Zenoh's runtime for the agents, plants and launcher of a SITL swarm: one thread instead of
+# five or six. Dozens of processes on a few cores then spend less CPU handing each message
+# between threads (30 robots: neighbour-state age p99 25 ms instead of 44 in an A/B pair of
+# runs). A ZENOH_RUNTIME in the launcher's environment wins (not for the router: its own).
+ZENOH_RUNTIME = zenoh_runtime(1)
 
 
 class SitlError(RuntimeError):
@@ -82,6 +83,7 @@ class SitlOptions:
     lead_time: float = 1.5              # s between the mission message and its epoch
     live: bool = True                   # live status table on a terminal
     robot_profile: str | None = None    # absolute path of the robot profile the plants use
+    launch: LaunchSettings = field(default_factory=LaunchSettings)   # router, age bound
 
 
 @dataclass
@@ -93,6 +95,7 @@ class SitlRun:
     killed: dict = field(default_factory=dict)    # robot id -> mission time [s] of its kill
     agent_stats: dict = field(default_factory=dict)
     plant_stats: list = field(default_factory=list)
+    recorded: dict = field(default_factory=dict)  # robot id -> states in the recording
 
 
 def free_tcp_port() -> int:
@@ -161,50 +164,54 @@ def _status_table(sc: Scenario, states: Mapping[int, Received[StateMsg]],
 
 
 class _Closable(Protocol):
-    """What run_sitl opens on its router and closes at the end, in reverse order."""
+    """What run_sitl opens on its Zenoh session and closes at the end, in reverse order."""
 
     def close(self) -> None: ...
 
 
 def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> SitlRun:
-    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. Its
-    processes inherit ZENOH_RUNTIME; the launcher's own router takes it too if its Zenoh has
-    not started yet (the variable is read once per process)."""
+    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. The
+    router runs in a process of its own (hil.sitl_launch); the launcher is a client of it.
+    Its processes inherit ZENOH_RUNTIME (the router: its own); the launcher's Zenoh takes it
+    too if it has not started yet (the variable is read once per process)."""
     os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     out.mkdir(parents=True, exist_ok=True)
+    config_dir = out / "config"
+    config_dir.mkdir(exist_ok=True)
     run = SitlRun()
     swarm = _swarm_name(sc)
     keys = Keys(swarm)
     port = opts.zenoh_port or free_tcp_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    router = open_session(session_config("router", listen=[endpoint]), "the SITL router")
-    opened: list[_Closable] = []
-    try:
-        recorder = Recorder(router, keys, out / "run.mcap")
-        opened.append(recorder)
-        presence = Presence(router, keys)
-        opened.append(presence)
-        truth = Latest(router, keys.truth("*"), TruthMsg.decode, time.time)
-        states = Latest(router, keys.state("*"), StateMsg.decode, time.time)
-        opened += [truth, states]
-        config_dir = out / "config"
-        config_dir.mkdir(exist_ok=True)
-        if opts.gcs_port:
-            router_mav = MavlinkRouter(free_udp_port(), opts.gcs_port).start()
-            opened.append(router_mav)
-            mav_port = router_mav.agents_port
-            console.print(f"MAVLink: every agent (system id = robot id) on udp 127.0.0.1:"
-                          f"{opts.gcs_port}; e.g. mavproxy.py --master=udpin:127.0.0.1:"
-                          f"{opts.gcs_port}, or QGroundControl's default UDP link")
-        else:
-            mav_port = free_udp_port()               # nobody listens: telemetry is dropped
-        settings = [agent_settings(sc, i, swarm, endpoint, opts, mav_port)
-                    for i in range(len(sc.ids))]
-        for s in settings:
-            (config_dir / f"robot_{s.robot_id}.toml").write_text(to_toml(s))
-        _write_manifest(out, sc, settings, endpoint, swarm)
+    with Children(out / "logs") as children:
+        router_child = start_router(children, endpoint, config_dir, opts.launch)
+        router = open_session(session_config("client", connect=[endpoint]),
+                              "the SITL launcher")
+        opened: list[_Closable] = []
+        try:
+            recorder = Recorder(router, keys, out / "run.mcap")
+            opened.append(recorder)
+            presence = Presence(router, keys)
+            opened.append(presence)
+            truth = Latest(router, keys.truth("*"), TruthMsg.decode, time.time)
+            states = Latest(router, keys.state("*"), StateMsg.decode, time.time)
+            opened += [truth, states]
+            if opts.gcs_port:
+                router_mav = MavlinkRouter(free_udp_port(), opts.gcs_port).start()
+                opened.append(router_mav)
+                mav_port = router_mav.agents_port
+                console.print(f"MAVLink: every agent (system id = robot id) on udp 127.0.0.1:"
+                              f"{opts.gcs_port}; e.g. mavproxy.py --master=udpin:127.0.0.1:"
+                              f"{opts.gcs_port}, or QGroundControl's default UDP link")
+            else:
+                mav_port = free_udp_port()               # nobody listens: telemetry is dropped
+            settings = [agent_settings(sc, i, swarm, endpoint, opts, mav_port)
+                        for i in range(len(sc.ids))]
+            for s in settings:
+                (config_dir / f"robot_{s.robot_id}.toml").write_text(to_toml(s))
+            _write_manifest(out, sc, settings, endpoint, swarm,
+                            {router_child.name: router_child.pid})
 
-        with Children(out / "logs") as children:
             _start_plants(children, sc, opts, swarm, endpoint, out)
             ids = {int(i) for i in sc.ids}
             console.print(f"plant starting ({len(ids)} robots) ...")
@@ -232,22 +239,32 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             console.print(f"mission published; t = 0 at epoch {run.epoch:.3f}")
             _watch(sc, run, children, agents, router, keys, mission, truth, states, presence,
                    opts, console)
-            # clean stop: agents first (zero velocity, IDLE), then the plants
+            # clean stop: agents first (zero velocity, IDLE), then the plants; the router
+            # last, once the recorder has what they published
             for child in agents.values():
                 if child.proc.poll() is None:
                     children.terminate(child)
-            children.terminate_all()
-        for s in settings:
-            path = out / "logs" / f"agent_{s.robot_id}.json"
-            if path.exists():
-                run.agent_stats[s.robot_id] = json.loads(path.read_text())
-        for path in sorted((out / "logs").glob("plant_*.json")):
-            run.plant_stats.append(json.loads(path.read_text()))
-        return run
-    finally:
-        for thing in reversed(opened):
-            thing.close()
-        router.close()
+            for child in reversed(children.children):
+                if child is not router_child:
+                    children.terminate(child)
+            recorder.settle()
+            for thing in reversed(opened):
+                thing.close()
+            opened.clear()
+        finally:
+            for thing in reversed(opened):
+                thing.close()
+            router.close()
+    for key, n in recorder.recorded_per_key.items():
+        if key.endswith("/state") and (rid := Keys.robot_id_of(key)) is not None:
+            run.recorded[rid] = n
+    for s in settings:
+        path = out / "logs" / f"agent_{s.robot_id}.json"
+        if path.exists():
+            run.agent_stats[s.robot_id] = json.loads(path.read_text())
+    for path in sorted((out / "logs").glob("plant_*.json")):
+        run.plant_stats.append(json.loads(path.read_text()))
+    return run
 
 
 def _failure(what: str, children: Children) -> str:
@@ -296,6 +313,7 @@ def _write_manifest(out: Path, sc: Scenario, settings: list[AgentSettings], endp
     tmp = out / "manifest.json.tmp"
     tmp.write_text(json.dumps(
         {"version": 1, "scenario": sc.name, "swarm": swarm, "zenoh_router": endpoint,
+         "router_pid": pids.get("router"),
          "plants": {k: v for k, v in pids.items() if k.startswith("plant")},
          "robots": robots}, indent=2) + "\n")
     tmp.replace(out / "manifest.json")

@@ -203,3 +203,24 @@ def test_a_client_waits_for_a_router_that_starts_after_it():
         for r in routers:
             r.close()
     assert routers
+
+
+def test_a_state_carries_its_routers_timestamp_and_publications_are_counted(sessions):
+    from transport.zenoh_link import SwarmLink
+    a, b = sessions
+    keys = Keys("t")
+    one = SwarmLink(a, keys, 1, time.time)
+    got = Latest(b, keys.state("*"), StateMsg.decode, time.time)
+    try:
+        time.sleep(0.3)
+        t0 = time.time()
+        one.publish(state(1, 1, t0))
+        assert wait_until(lambda: 1 in got.snapshot(), 5.0, poll=0.01)
+        rec = got.snapshot()[1]
+        # one machine, one clock: published, then routed, then taken (1 ms for rounding)
+        assert rec.routed is not None
+        assert t0 - 1e-3 <= rec.routed <= rec.received + 1e-3
+        assert one.counters()["published"] == 1
+    finally:
+        got.close()
+        one.close()

@@ -185,7 +185,9 @@ class Latest(Generic[M]):
                 self.dropped["out_of_order"] += 1
                 continue
             self.accepted += 1
-            latest[rid] = Received(msg, now)
+            ts = sample.timestamp            # the router's, when it timestamps (its default)
+            latest[rid] = Received(msg, now,
+                                   ts.get_time_as_ntp64().as_nanos() * 1e-9 if ts else None)
         if latest is not None:
             self._latest = MappingProxyType(latest)
 
@@ -417,6 +419,7 @@ class SwarmLink:
         self._pub = session.declare_publisher(keys.state(robot_id))
         self._beacon = session.declare_publisher(keys.beacon(robot_id))
         self._beacon_due = 0.0
+        self.published = 0             # states put (beacons apart)
         self._token = session.liveliness().declare_token(keys.robot(robot_id))
         self.states: Latest[StateMsg] | NearStates = (
             NearStates(session, keys, robot_id, clock, near_radius,
@@ -428,6 +431,7 @@ class SwarmLink:
     def publish(self, state: StateMsg) -> None:
         payload = state.encode()
         self._pub.put(payload)
+        self.published += 1
         # schedules only: a step of the wall clock must not stall them
         now = time.monotonic()
         if now >= self._beacon_due:
@@ -448,7 +452,8 @@ class SwarmLink:
         return got.msg if got else None
 
     def counters(self) -> dict:
-        out: dict[str, object] = {"states": self.states.counters(),
+        out: dict[str, object] = {"published": self.published,
+                                  "states": self.states.counters(),
                                   "obstacles": self._obstacles.counters(),
                                   "mission": self._mission.counters()}
         if isinstance(self.states, NearStates):
