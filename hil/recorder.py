@@ -156,7 +156,7 @@ class Recorder:
             except zenoh.ZError:           # empty and closed: the subscriber is undeclared
                 pass
 
-    def settle(self, quiet: float = 0.3, timeout: float = 5.0) -> None:
+    def settle(self, quiet: float = 0.5, timeout: float = 10.0) -> None:
         """Wait until nothing has been written for ``quiet`` s (what was in flight when the
         publishers ended has arrived), at most ``timeout`` s."""
         end = time.monotonic() + timeout

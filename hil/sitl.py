@@ -48,10 +48,10 @@ from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
 from hil.scenario import Scenario
-from hil.sitl_launch import LaunchSettings, start_router, zenoh_runtime
+from hil.sitl_launch import LaunchSettings, open_launcher_session, start_router, zenoh_runtime
 from transport.canbus import DEFAULT_GROUP
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
-from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
+from transport.zenoh_link import Keys, Latest, Presence
 
 log = logging.getLogger(__name__)
 
@@ -185,11 +185,12 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
     endpoint = f"tcp/127.0.0.1:{port}"
     with Children(out / "logs") as children:
         router_child = start_router(children, endpoint, config_dir, opts.launch)
-        router = open_session(session_config("client", connect=[endpoint]),
-                              "the SITL launcher")
+        router = open_launcher_session(endpoint, opts.launch)
         opened: list[_Closable] = []
         try:
-            recorder = Recorder(router, keys, out / "run.mcap")
+            # a minute of a 50-robot swarm's samples: the recorder thread (normal scheduling)
+            # may fall far behind while the agents run, the launcher's Zenoh threads never
+            recorder = Recorder(router, keys, out / "run.mcap", capacity=1 << 17)
             opened.append(recorder)
             presence = Presence(router, keys)
             opened.append(presence)

@@ -13,8 +13,12 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import zenoh
+
+from agent.loop import use_normal_scheduling, use_realtime
 from common.schema import setting, validate
 from hil.processes import Child, Children
+from transport.zenoh_link import open_session, session_config
 
 
 def zenoh_runtime(threads: int) -> str:
@@ -58,3 +62,15 @@ def start_router(children: Children, endpoint: str, config_dir: Path,
         args += ["--realtime-priority", str(launch.router_priority)]
     return children.start("router", args,
                           env={"ZENOH_RUNTIME": zenoh_runtime(launch.router_threads)})
+
+
+def open_launcher_session(endpoint: str, launch: LaunchSettings) -> zenoh.Session:
+    """The launcher's client session to the router at ``endpoint``: Zenoh's threads, started
+    with it, inherit SCHED_FIFO at ``launch.router_priority`` (when granted); the calling
+    thread goes back to normal scheduling."""
+    realtime = launch.router_priority > 0 and use_realtime(launch.router_priority)
+    try:
+        return open_session(session_config("client", connect=[endpoint]), "the SITL launcher")
+    finally:
+        if realtime:
+            use_normal_scheduling()
