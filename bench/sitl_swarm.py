@@ -14,8 +14,9 @@ oldest 1 % (``pub``: publish -> router, ``rtr``: router -> the agent's ring, ``h
 agent; ``-`` for a commit without the stages), steady CPU in the mission (from /proc, 3 s after
 the epoch until 2 s before the end; % of one core) per agent, of the plant, of the launcher
 (recorder, status, MAVLink router; and the router when the launcher hosts it), of the router
-process and in all (the machine has 200 %), states missing from the recording, and the
-safety/convergence outcome. Misses are the agents' overruns in the mission (t = 0 ..
+process and in all (the machine has 200 %), states missing from the recording (the agents'
+ticks, each publishing one, less the states in ``run.mcap``), and the safety/convergence
+outcome. Misses are the agents' overruns in the mission (t = 0 ..
 duration) and, apart, outside it (start-up and shut-down).
 
 ``--against REV`` runs REV's launcher (a temporary git worktree) and this checkout's in turn,
@@ -32,6 +33,7 @@ import json
 import math
 import os
 import shlex
+import signal
 import subprocess
 import sys
 import tempfile
@@ -116,12 +118,37 @@ def run_once(n: int, args: argparse.Namespace, tmp: Path, checkout: Path,
                 cpu = {k: (c1[k] - c0[k]) / (t1 - t0) for k in c0}
         proc.wait(timeout=600)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        if proc.poll() is None:         # Ctrl-C first: the launcher ends its children
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=120)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
     if not (out / "metrics.json").exists():
         return f"failed (exit {proc.returncode}): {''.join(lines)[-500:]}"
-    return json.loads((out / "metrics.json").read_text()), cpu
+    m = json.loads((out / "metrics.json").read_text())
+    m["unrecorded"] = unrecorded(out)
+    return m, cpu
+
+
+def unrecorded(out: Path) -> int:
+    """States the agents published (one per tick, from their statistics) that ``run.mcap``
+    lacks: the same count for any commit's run folder."""
+    from mcap.reader import make_reader
+    with open(out / "run.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    if summary is None or summary.statistics is None:
+        return -1
+    counts = summary.statistics.channel_message_counts
+    recorded = {c.topic: counts.get(cid, 0) for cid, c in summary.channels.items()}
+    missing = 0
+    for path in (out / "logs").glob("agent_*.json"):
+        st = json.loads(path.read_text())
+        got = sum(n for topic, n in recorded.items()
+                  if topic.endswith(f"/robot/{st['robot_id']}/state"))
+        missing += max(st["agent"]["ticks"] - got, 0)
+    return missing
 
 
 HEADER = (f"{'commit':>9} {'robots':>6} {'misses':>7} {'outside':>7} {'jit p50':>8} "
@@ -138,8 +165,7 @@ def row(label: str, n: int, m: dict, cpu: dict, loads: str) -> tuple[str, float]
     w = s.get("neighbour_age_worst")
     stage = (f"{STAGE_SHORT[w['stage']]} {w['stage_tail_ms'][w['stage']]:.0f}"
              if w and w["stage"] else "-")
-    rec = s.get("recording")
-    unrec = str(sum(rec["states_missing"].values())) if rec else "-"
+    unrec = str(m["unrecorded"])
     return (f"{label:>9} {n:>6} {s['deadline_misses_in_mission']:>7} "
             f"{s['deadline_misses'] - s['deadline_misses_in_mission']:>7} "
             f"{pct(s['jitter_p50_ms_per_agent'].values(), 50):>8.2f} "
@@ -168,6 +194,8 @@ def main() -> None:
                         help="further arguments of this checkout's boundswarm sitl")
     args = parser.parse_args()
     args.lead = 1.5                        # s, the launcher's mission lead time
+    # SIGTERM as Ctrl-C: the run in progress and REV's worktree are ended on the way out
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
     print(HEADER, flush=True)
     with (worktree(args.against) if args.against else contextlib.nullcontext()) as other:
         runs = [("this", ROOT, shlex.split(args.sitl_args))]

@@ -166,7 +166,8 @@ STAGE_NAMES = {"publish_to_router": "publish -> router (the publishing agent's p
                                      "its link)",
                "router_to_agent": "router -> the agent's ring (the router and the receiving "
                                    "process)",
-               "in_agent": "the agent (held between its ring and the law)"}
+               "in_agent": "the agent, held while no newer state came (a beacon-only "
+                           "neighbour, or newer states lost or late on the way)"}
 
 
 def describe_stage(worst: dict) -> str:
