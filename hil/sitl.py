@@ -240,11 +240,9 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             console.print(f"mission published; t = 0 at epoch {run.epoch:.3f}")
             _watch(sc, run, children, agents, router, keys, mission, truth, states, presence,
                    opts, console)
-            # clean stop: agents first (zero velocity, IDLE), then the plants; the router
-            # last, once the recorder has what they published
-            for child in agents.values():
-                if child.proc.poll() is None:
-                    children.terminate(child)
+            # clean stop: agents first, all at once (zero velocity, IDLE), then the plants;
+            # the router last, once the recorder has what they published
+            children.terminate_together(list(agents.values()))
             for child in reversed(children.children):
                 if child is not router_child:
                     children.terminate(child)
