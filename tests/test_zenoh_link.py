@@ -1,4 +1,5 @@
 """Zenoh link over a router on loopback (scouting off): keys, latest values, presence."""
+import math
 import threading
 import time
 
@@ -227,27 +228,28 @@ def test_a_state_carries_its_routers_timestamp_and_publications_are_counted(sess
 
 
 def test_a_robot_closing_in_fast_is_followed_at_full_rate_before_it_is_near(sessions):
-    """12 m away, radius 10: a robot driving at 3 m/s towards one at 3 m/s is subscribed to
-    (the two may close 2.4 m before its states flow), one standing still is not."""
+    """12 m away, radius 10, from one driving east at 3 m/s: a robot coming at 3 m/s from
+    the east is subscribed to (they may close 2.4 m before its states flow), one beside it
+    driving east as fast is not."""
     from transport.zenoh_link import SwarmLink
 
     a, b = sessions
     keys = Keys("lead")
     me = SwarmLink(a, keys, 1, time.time, near_radius=10.0)
-    fast, still = SwarmLink(b, keys, 2, time.time), SwarmLink(b, keys, 3, time.time)
+    fast, along = SwarmLink(b, keys, 2, time.time), SwarmLink(b, keys, 3, time.time)
     try:
         time.sleep(0.3)
         end = time.monotonic() + 1.5
         seq = 0
         while time.monotonic() < end:
             seq += 1
-            for link, rid, x, y, v in ((fast, 2, 12.0, 0.0, 3.0), (still, 3, 0.0, 12.0, 0.0),
-                                       (me, 1, 0.0, 0.0, 3.0)):
-                link.publish(StateMsg(rid, seq, time.time(), x, y, 0.0, v, 0.0, 0.0, 0.0, 0,
+            for link, rid, x, y, theta in ((fast, 2, 12.0, 0.0, math.pi),
+                                           (along, 3, 0.0, 12.0, 0.0), (me, 1, 0.0, 0.0, 0.0)):
+                link.publish(StateMsg(rid, seq, time.time(), x, y, theta, 3.0, 0.0, 0.0, 0.0, 0,
                                       StateFlags(0)))
             me.neighbours()
             time.sleep(0.02)
         assert me.counters()["near"] == [2]
     finally:
-        for link in (me, fast, still):
+        for link in (me, fast, along):
             link.close()

@@ -307,16 +307,17 @@ class NearStates:
     """Neighbour states for a large swarm: all beacons, full-rate states of the robots near.
 
     A thread of its own revises the subscriptions every ``period`` [s] around the position
-    and speed last given to :meth:`focus` (metres, world frame; m/s): it subscribes to the
+    and velocity last given to :meth:`focus` (metres, world frame; m/s): it subscribes to the
     state key of each robot that is, or may be, within ``radius`` by the time its full-rate
     states flow, and drops the subscription of robots beyond ``radius + hysteresis``. "May
-    be": its last known distance less how far the two robots can close at their reported
-    speeds over that data's age plus ``lead`` [s] (a refocus period, a beacon period and the
-    subscription's set-up), so that a robot closing in fast is followed at full rate before
-    it is within ``radius``, not on 5 Hz beacons. Declaring and undeclaring take Zenoh's
-    locks, which its (normally scheduled) threads may hold, so the real-time loop never does
-    it. :meth:`snapshot` is like :meth:`Latest.snapshot`: per robot, the newer of its beacon
-    and its state, a mapping never mutated afterwards.
+    be": its last known distance less how far the two robots can close in on each other (the
+    norm of their velocities' difference, as reported) over that data's age plus ``lead``
+    [s] (a refocus period, a beacon period and the subscription's set-up), so that a robot
+    closing in fast is followed at full rate before it is within ``radius``, not on 5 Hz
+    beacons, while robots moving together in formation are not. Declaring and undeclaring
+    take Zenoh's locks, which its (normally scheduled) threads may hold, so the real-time
+    loop never does it. :meth:`snapshot` is like :meth:`Latest.snapshot`: per robot, the
+    newer of its beacon and its state, a mapping never mutated afterwards.
     """
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
@@ -336,16 +337,16 @@ class NearStates:
         self._closed: dict[str, Any] = {"received": 0, "accepted": 0, "dropped": Counter()}
         self._counter_lock = threading.Lock()
         self._snapshot: Mapping[int, Received[StateMsg]] = MappingProxyType({})
-        self._focus: tuple[float, float, float] | None = None
+        self._focus: tuple[float, float, float, float] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._refocus_loop, args=(period, thread_setup),
                                         name=f"near-refocus-{robot_id}", daemon=True)
         self._thread.start()
 
-    def focus(self, x: float, y: float, speed: float = 0.0) -> None:
-        """Own position [m] and speed [m/s] to revise the near set around (cheap, never
+    def focus(self, x: float, y: float, vx: float = 0.0, vy: float = 0.0) -> None:
+        """Own position [m] and velocity [m/s] to revise the near set around (cheap, never
         blocks)."""
-        self._focus = (x, y, speed)
+        self._focus = (x, y, vx, vy)
 
     def snapshot(self) -> Mapping[int, Received[StateMsg]]:
         near = self.near
@@ -364,16 +365,18 @@ class NearStates:
             except zenoh.ZError:                # e.g. the session closing: try again later
                 log.exception("near set not revised")
 
-    def refocus(self, x: float, y: float, speed: float = 0.0) -> None:
-        """Subscribe to the robots now near (x, y) [m] for a robot at ``speed`` [m/s], drop
-        those gone far."""
+    def refocus(self, x: float, y: float, vx: float = 0.0, vy: float = 0.0) -> None:
+        """Subscribe to the robots now near (x, y) [m] for a robot moving at (vx, vy) [m/s],
+        drop those gone far."""
         near = dict(self.near)
         new, gone = [], []
         now = self._clock()
         try:
             for rid, rec in self._snapshot.items():
                 m = rec.msg
-                closing = (abs(speed) + abs(m.v)) * (max(now - m.stamp, 0.0) + self.lead)
+                relative = math.hypot(m.v * math.cos(m.theta) - vx,
+                                      m.v * math.sin(m.theta) - vy)
+                closing = relative * (max(now - m.stamp, 0.0) + self.lead)
                 d = ((m.x - x) ** 2 + (m.y - y) ** 2) ** 0.5 - closing
                 if rid not in near and d <= self.radius:
                     near[rid] = Latest(self._session, self._keys.state(rid), StateMsg.decode,
@@ -448,7 +451,8 @@ class SwarmLink:
             self._beacon.put(payload)
             self._beacon_due = now + self.BEACON_PERIOD
         if isinstance(self.states, NearStates):
-            self.states.focus(state.x, state.y, state.v)
+            self.states.focus(state.x, state.y, state.v * math.cos(state.theta),
+                              state.v * math.sin(state.theta))
 
     def neighbours(self) -> Mapping[int, Received[StateMsg]]:
         return self.states.snapshot()
