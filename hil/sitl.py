@@ -171,48 +171,52 @@ class _Closable(Protocol):
 
 def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> SitlRun:
     """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. The
-    router runs in a process of its own (hil.sitl_launch); the launcher is a client of it.
-    Its processes inherit ZENOH_RUNTIME (the router: its own); the launcher's Zenoh takes it
-    too if it has not started yet (the variable is read once per process)."""
+    router runs in a process of its own (hil.sitl_launch), ended last; the launcher is a
+    client of it. Its processes inherit ZENOH_RUNTIME (the router: its own); the launcher's
+    Zenoh takes it too if it has not started yet (the variable is read once per process)."""
     os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     out.mkdir(parents=True, exist_ok=True)
-    config_dir = out / "config"
-    config_dir.mkdir(exist_ok=True)
     run = SitlRun()
     swarm = _swarm_name(sc)
     keys = Keys(swarm)
     port = opts.zenoh_port or free_tcp_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    with Children(out / "logs") as children:
-        router_child = start_router(children, endpoint, config_dir, opts.launch)
+    config_dir = out / "config"
+    config_dir.mkdir(exist_ok=True)
+    router_child = Children(out / "logs")
+    try:
+        router_pid = start_router(router_child, endpoint, config_dir, opts.launch).pid
         router = open_launcher_session(endpoint, opts.launch)
-        opened: list[_Closable] = []
-        try:
-            # a minute of a 50-robot swarm's samples: the recorder thread (normal scheduling)
-            # may fall far behind while the agents run, the launcher's Zenoh threads never
-            recorder = Recorder(router, keys, out / "run.mcap", capacity=1 << 17)
-            opened.append(recorder)
-            presence = Presence(router, keys)
-            opened.append(presence)
-            truth = Latest(router, keys.truth("*"), TruthMsg.decode, time.time)
-            states = Latest(router, keys.state("*"), StateMsg.decode, time.time)
-            opened += [truth, states]
-            if opts.gcs_port:
-                router_mav = MavlinkRouter(free_udp_port(), opts.gcs_port).start()
-                opened.append(router_mav)
-                mav_port = router_mav.agents_port
-                console.print(f"MAVLink: every agent (system id = robot id) on udp 127.0.0.1:"
-                              f"{opts.gcs_port}; e.g. mavproxy.py --master=udpin:127.0.0.1:"
-                              f"{opts.gcs_port}, or QGroundControl's default UDP link")
-            else:
-                mav_port = free_udp_port()               # nobody listens: telemetry is dropped
-            settings = [agent_settings(sc, i, swarm, endpoint, opts, mav_port)
-                        for i in range(len(sc.ids))]
-            for s in settings:
-                (config_dir / f"robot_{s.robot_id}.toml").write_text(to_toml(s))
-            _write_manifest(out, sc, settings, endpoint, swarm,
-                            {router_child.name: router_child.pid})
+    except BaseException:
+        router_child.terminate_all()
+        raise
+    opened: list[_Closable] = []
+    try:
+        # a minute of a 50-robot swarm's samples: the recorder thread (normal scheduling) may
+        # fall far behind while the agents run, the launcher's Zenoh threads never do
+        recorder = Recorder(router, keys, out / "run.mcap", capacity=1 << 17)
+        opened.append(recorder)
+        presence = Presence(router, keys)
+        opened.append(presence)
+        truth = Latest(router, keys.truth("*"), TruthMsg.decode, time.time)
+        states = Latest(router, keys.state("*"), StateMsg.decode, time.time)
+        opened += [truth, states]
+        if opts.gcs_port:
+            router_mav = MavlinkRouter(free_udp_port(), opts.gcs_port).start()
+            opened.append(router_mav)
+            mav_port = router_mav.agents_port
+            console.print(f"MAVLink: every agent (system id = robot id) on udp 127.0.0.1:"
+                          f"{opts.gcs_port}; e.g. mavproxy.py --master=udpin:127.0.0.1:"
+                          f"{opts.gcs_port}, or QGroundControl's default UDP link")
+        else:
+            mav_port = free_udp_port()               # nobody listens: telemetry is dropped
+        settings = [agent_settings(sc, i, swarm, endpoint, opts, mav_port)
+                    for i in range(len(sc.ids))]
+        for s in settings:
+            (config_dir / f"robot_{s.robot_id}.toml").write_text(to_toml(s))
+        _write_manifest(out, sc, settings, endpoint, swarm, {"router": router_pid})
 
+        with Children(out / "logs") as children:
             _start_plants(children, sc, opts, swarm, endpoint, out)
             ids = {int(i) for i in sc.ids}
             console.print(f"plant starting ({len(ids)} robots) ...")
@@ -226,7 +230,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                     ["agent", "--config", str(config_dir / f"robot_{s.robot_id}.toml"),
                      "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")])
             _write_manifest(out, sc, settings, endpoint, swarm,
-                            {c.name: c.pid for c in children.children})
+                            {"router": router_pid, **{c.name: c.pid for c in children.children}})
             console.print(f"{len(agents)} agents starting ...")
             if not wait_until(lambda: presence.alive() >= ids or children.failed(),
                               opts.startup_timeout) or children.failed():
@@ -240,30 +244,26 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             console.print(f"mission published; t = 0 at epoch {run.epoch:.3f}")
             _watch(sc, run, children, agents, router, keys, mission, truth, states, presence,
                    opts, console)
-            # clean stop: agents first, all at once (zero velocity, IDLE), then the plants;
-            # the router last, once the recorder has what they published
+            # clean stop: agents first, all at once (zero velocity, IDLE), then the plants
             children.terminate_together(list(agents.values()))
-            for child in reversed(children.children):
-                if child is not router_child:
-                    children.terminate(child)
-            recorder.settle()
-            for thing in reversed(opened):
-                thing.close()
-            opened.clear()
-        finally:
-            for thing in reversed(opened):
-                thing.close()
-            router.close()
-    for key, n in recorder.recorded_per_key.items():
-        if key.endswith("/state") and (rid := Keys.robot_id_of(key)) is not None:
-            run.recorded[rid] = n
-    for s in settings:
-        path = out / "logs" / f"agent_{s.robot_id}.json"
-        if path.exists():
-            run.agent_stats[s.robot_id] = json.loads(path.read_text())
-    for path in sorted((out / "logs").glob("plant_*.json")):
-        run.plant_stats.append(json.loads(path.read_text()))
-    return run
+            children.terminate_all()
+        recorder.settle()             # what they published before they ended has arrived
+        recorder.close()
+        for key, n in recorder.recorded_per_key.items():
+            if key.endswith("/state") and (rid := Keys.robot_id_of(key)) is not None:
+                run.recorded[rid] = n
+        for s in settings:
+            path = out / "logs" / f"agent_{s.robot_id}.json"
+            if path.exists():
+                run.agent_stats[s.robot_id] = json.loads(path.read_text())
+        for path in sorted((out / "logs").glob("plant_*.json")):
+            run.plant_stats.append(json.loads(path.read_text()))
+        return run
+    finally:
+        for thing in reversed(opened):
+            thing.close()
+        router.close()
+        router_child.terminate_all()
 
 
 def _failure(what: str, children: Children) -> str:
