@@ -33,8 +33,10 @@ def zenoh_runtime(threads: int) -> str:
 class LaunchSettings:
     """The SITL launcher's data path and the bound its summary checks."""
 
-    router_priority: int = setting(11, doc="SCHED_FIFO priority of the Zenoh router process "
-                                   "(0: normal scheduling)", lo=0, hi=99)
+    router_priority: int = setting(9, doc="SCHED_FIFO priority of the Zenoh router process "
+                                   "and of the launcher's Zenoh threads (0: normal "
+                                   "scheduling); 9: with the agents' Zenoh threads, under "
+                                   "their loops (10)", lo=0, hi=99)
     router_threads: int = setting(2, doc="Zenoh runtime worker threads of the router",
                                   lo=1, hi=16)
     age_bound: float = setting(0.05, unit="s", doc="the summary warns when an agent's "
