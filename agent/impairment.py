@@ -79,7 +79,8 @@ class ImpairedSwarm:
         self._taken: dict[int, float] = {}     # sender -> stamp [s] of its newest state taken
         self._count: dict[int, int] = {}       # sender -> states taken (key of the draws)
         self._bad: dict[int, int] = {}         # sender -> its link's last loss_step
-        self._pending: list[tuple[float, int, int, StateMsg]] = []   # (due [s], n, sender, state)
+        # (due [s], n, sender, state, router's stamp [s] or None)
+        self._pending: list[tuple[float, int, int, StateMsg, float | None]] = []
         self._pushed = 0
         self._held: dict[int, Received[StateMsg]] = {}
         self._view: Mapping[int, Received[StateMsg]] = MappingProxyType({})
@@ -116,16 +117,16 @@ class ImpairedSwarm:
             if imp.link_jitter > 0.0:
                 delay += imp.link_jitter * normal(imp.seed, LINK_AGE, self.robot_id, sender, k)
             heapq.heappush(self._pending, (rec.received + max(delay, 0.0), self._pushed,
-                                           sender, rec.msg))
+                                           sender, rec.msg, rec.routed))
             self._pushed += 1
         now, changed = self.clock(), False
         while self._pending and self._pending[0][0] <= now:
-            due, _, sender, msg = heapq.heappop(self._pending)
+            due, _, sender, msg, routed = heapq.heappop(self._pending)
             held = self._held.get(sender)
             if held is not None and msg.stamp <= held.msg.stamp:
                 self.superseded += 1                       # overtaken by a newer state
                 continue
-            self._held[sender] = Received(msg, due)
+            self._held[sender] = Received(msg, due, routed)
             changed = True
         if changed:
             self._view = MappingProxyType(dict(self._held))

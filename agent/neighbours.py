@@ -50,6 +50,7 @@ class InRange:
     stale_y: list[float] = field(default_factory=list)
     stale_id: list[int] = field(default_factory=list)   # their robot ids
     ages: list[float] = field(default_factory=list)  # s, now - stamp of each fresh one
+    fresh: list[int] = field(default_factory=list)   # index of each fresh one in the input
 
 
 def extrapolate(x: float, y: float, theta: float, v: float, u: float, age: float,
@@ -74,7 +75,7 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
     as age 0.
     """
     out = InRange()
-    for m in states:
+    for i, m in enumerate(states):
         age = now - m.stamp
         px, py, stale = extrapolate(m.x, m.y, m.theta, m.v, m.u, age, staleness)
         if math.hypot(px - x, py - y) <= reach:
@@ -87,4 +88,5 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
                 out.fresh_y.append(py)
                 out.fresh_id.append(m.robot_id)
                 out.ages.append(age)
+                out.fresh.append(i)
     return out

@@ -51,12 +51,26 @@ ARM_RETRY = 0.25   # s between repeated arm requests while the drivers have not 
 _PARAMS: dict[str, Param] = {p.name: p for p in CONTROL_PARAMS}
 
 
+AGE_STAGES = ("publish_to_router", "router_to_agent", "in_agent")
+_NO_STAGES = (math.nan, math.nan, math.nan)
+
+
+def _stages(rec: Received[StateMsg], now: float) -> tuple[float, float, float]:
+    """Where a neighbour state used at ``now`` [s] spent its age [s] (AGE_STAGES): from its
+    stamp to the router's timestamp, from there until this agent took it from its ring, and
+    held in this agent until used; NaNs without a router timestamp."""
+    if rec.routed is None:
+        return _NO_STAGES
+    return rec.routed - rec.msg.stamp, rec.received - rec.routed, now - rec.received
+
+
 @dataclass
 class AgentCounters:
     ticks: int = 0
     failsafes: int = 0
     nonfinite_commands: int = 0
     neighbour_age: deque = field(default_factory=lambda: deque(maxlen=20000))  # s
+    age_stages: deque = field(default_factory=lambda: deque(maxlen=20000))  # s, AGE_STAGES
     law_steps: int = 0
     governed: int = 0                    # law steps in which the governor lowered the speed
     governor_min_allowed: float = math.inf   # m/s
@@ -76,7 +90,22 @@ class AgentCounters:
                 "neighbour_age_ms": {
                     "p50": float(np.percentile(ages, 50)) if ages.size else None,
                     "p99": float(np.percentile(ages, 99)) if ages.size else None,
-                    "count": int(ages.size)}}
+                    "count": int(ages.size)},
+                "neighbour_age_stages_ms": self._stage_summary(ages)}
+
+    def _stage_summary(self, ages: np.ndarray) -> dict | None:
+        """Per stage of AGE_STAGES [ms]: p50, p99, and ``tail``, its mean over the uses
+        whose age is at or above the age's p99 (what made the oldest data old). None
+        without router timestamps."""
+        stages = np.asarray(self.age_stages, dtype=float).reshape(-1, len(AGE_STAGES)) * 1e3
+        known = ~np.isnan(stages[:, 0])
+        if not known.any():
+            return None
+        tail = known & (ages >= np.percentile(ages, 99))
+        return {name: {"p50": float(np.percentile(stages[known, k], 50)),
+                       "p99": float(np.percentile(stages[known, k], 99)),
+                       "tail": float(stages[tail, k].mean()) if tail.any() else None}
+                for k, name in enumerate(AGE_STAGES)}
 
 
 class Agent:
@@ -427,9 +456,11 @@ class Agent:
         [m] (the detections ``obs``), stale robots included as static obstacles at their
         last position: the governor's disc of a silent robot less a, at least a/2."""
         me = self.s.robot_id
-        near = in_range((r.msg for rid, r in neighbours.items() if rid != me),
-                        pose[0], pose[1], now_w, self.s.timeouts.staleness, self.s.sensing_range)
+        recs = [r for rid, r in neighbours.items() if rid != me]
+        near = in_range([r.msg for r in recs], pose[0], pose[1], now_w,
+                        self.s.timeouts.staleness, self.s.sensing_range)
         self.counters.neighbour_age.extend(near.ages)
+        self.counters.age_stages.extend(_stages(recs[i], now_w) for i in near.fresh)
         obs_x, obs_y, obs_r = ((obs.centers[:, 0].tolist(), obs.centers[:, 1].tolist(),
                                 obs.radii.tolist()) if obs is not None else ([], [], []))
         obs_x += near.stale_x

@@ -12,11 +12,13 @@ The worktree is removed at the end, also on failure or Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Iterator
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -35,6 +37,26 @@ def run_in(checkout: Path, script: list[str]) -> str:
     return done.stdout
 
 
+def short(rev: str) -> str:
+    """The short hash of ``rev``."""
+    return subprocess.run(["git", "rev-parse", "--short", rev], cwd=ROOT, check=True,
+                          capture_output=True, text=True).stdout.strip()
+
+
+@contextlib.contextmanager
+def worktree(rev: str) -> Iterator[Path]:
+    """A temporary detached git worktree of ``rev``, removed at the end (also on failure)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        other = Path(tmp) / "other"
+        subprocess.run(["git", "worktree", "add", "--detach", str(other), rev], cwd=ROOT,
+                       check=True, capture_output=True)
+        try:
+            yield other
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(other)], cwd=ROOT,
+                           check=False, capture_output=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("rev", help="the other commit (hash, tag, branch)")
@@ -44,20 +66,12 @@ def main() -> None:
         ap.error("give the benchmark after --, e.g. -- bench/batch_scaling.py")
     cut = argv.index("--")
     args, script = ap.parse_args(argv[:cut]), argv[cut + 1:]
-    label = subprocess.run(["git", "rev-parse", "--short", args.rev], cwd=ROOT, check=True,
-                           capture_output=True, text=True).stdout.strip()
-    with tempfile.TemporaryDirectory() as tmp:
-        other = Path(tmp) / "other"
-        subprocess.run(["git", "worktree", "add", "--detach", str(other), args.rev], cwd=ROOT,
-                       check=True, capture_output=True)
-        try:
-            for r in range(args.rounds):
-                for name, checkout in ((label, other), ("this checkout", ROOT)):
-                    print(f"=== round {r + 1}, {name}: {' '.join(script)}", flush=True)
-                    print(run_in(checkout, script), flush=True)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(other)], cwd=ROOT,
-                           check=False, capture_output=True)
+    label = short(args.rev)
+    with worktree(args.rev) as other:
+        for r in range(args.rounds):
+            for name, checkout in ((label, other), ("this checkout", ROOT)):
+                print(f"=== round {r + 1}, {name}: {' '.join(script)}", flush=True)
+                print(run_in(checkout, script), flush=True)
 
 
 if __name__ == "__main__":

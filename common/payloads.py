@@ -71,10 +71,12 @@ M = TypeVar("M")
 
 @dataclass(frozen=True)
 class Received(Generic[M]):
-    """A decoded message and when it arrived (UNIX time [s], receiver's clock)."""
+    """A decoded message, when the receiver took it (UNIX time [s], receiver's clock) and
+    when its Zenoh router timestamped it on the way (UNIX time [s]; None: no router stamp)."""
 
     msg: M
     received: float
+    routed: float | None = None
 
 
 class PayloadError(ValueError):

@@ -80,6 +80,25 @@ class Children:
                 log.warning("%s (pid %d) ignored %s", child.name, child.pid, sig.name)
         return child.proc.poll()
 
+    def terminate_together(self, children: list[Child], grace: float = 3.0) -> None:
+        """End ``children`` at once: SIGINT to every one, then SIGTERM to those still there
+        after ``grace`` s, then SIGKILL (a swarm's agents stop within a period of each
+        other, not one after another, each using the last state of those already gone)."""
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            running = [c for c in children if c.proc.poll() is None]
+            for child in running:
+                child.expected_exit = True
+                try:
+                    os.killpg(child.proc.pid, sig)
+                except ProcessLookupError:
+                    pass
+            end = time.monotonic() + grace
+            for child in running:
+                try:
+                    child.proc.wait(timeout=max(end - time.monotonic(), 0.0))
+                except subprocess.TimeoutExpired:
+                    log.warning("%s (pid %d) ignored %s", child.name, child.pid, sig.name)
+
     def terminate_all(self, grace: float = 3.0) -> None:
         """End every child, newest first (agents before the plant that serves them)."""
         for child in reversed(self.children):

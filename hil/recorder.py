@@ -102,6 +102,7 @@ class Recorder:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self.recorded = 0
+        self.recorded_per_key: Counter = Counter()    # key -> messages written
         self.dropped: Counter = Counter()
         self._closed = False
         self._stop = threading.Event()
@@ -153,8 +154,21 @@ class Recorder:
                         self.dropped["write_error"] += 1
                         continue
                     self.recorded += 1
+                    self.recorded_per_key[key] += 1
             except zenoh.ZError:           # empty and closed: the subscriber is undeclared
                 pass
+
+    def settle(self, quiet: float = 0.5, timeout: float = 10.0) -> None:
+        """Wait until nothing has been written for ``quiet`` s (what was in flight when the
+        publishers ended has arrived), at most ``timeout`` s."""
+        end = time.monotonic() + timeout
+        seen, since = -1, time.monotonic()
+        while time.monotonic() < end:
+            if self.recorded != seen:
+                seen, since = self.recorded, time.monotonic()
+            elif time.monotonic() - since >= quiet:
+                return
+            time.sleep(self._interval)
 
     def close(self) -> None:
         """Stop receiving, write what was received and finish the file."""

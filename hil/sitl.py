@@ -1,12 +1,13 @@
 """The one-command SITL swarm: router, plant, one agent process per robot, recording.
 
-Sequence: open the Zenoh router in this process (loopback endpoint, scouting off) and start
-recording; write each robot's agent config and the run manifest; start the plant process(es)
-(emulated drivers on one CAN bus per robot, robot motion, truth and obstacle detections) and
-wait for truth from every robot; start the agents and wait for every liveliness token;
-publish the mission with an epoch a little in the future; watch the run (progress, live
-status table, lost processes); then end every child (agents first: zero velocity, IDLE) and
-turn the recording into the same run folder as ``sim``, plus loop timing, neighbour-state age
+Sequence: start the Zenoh router in a process of its own (loopback endpoint, scouting off;
+hil.sitl_launch), connect to it and start recording; write each robot's agent config and the
+run manifest; start the plant process(es) (emulated drivers on one CAN bus per robot, robot
+motion, truth and obstacle detections) and wait for truth from every robot; start the agents
+and wait for every liveliness token; publish the mission with an epoch a little in the
+future; watch the run (progress, live status table, lost processes); then end every child
+(agents first: zero velocity, IDLE; the router once the recording has settled) and turn the
+recording into the same run folder as ``sim``, plus loop timing, neighbour-state age
 and watchdog trips.
 
 A plant that dies ends the run at once; an agent that dies is reported and the run goes on
@@ -50,20 +51,20 @@ from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
 from hil.scenario import Scenario
+from hil.sitl_launch import LaunchSettings, open_launcher_session, start_router, zenoh_runtime
 from transport.canbus import DEFAULT_GROUP
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
-from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
+from transport.zenoh_link import Keys, Latest, Presence
 
 log = logging.getLogger(__name__)
 
 MODE_NAMES = {0: "TRACK", 1: "AVOID", 2: "ROTATE"}
 
-# Zenoh's runtime for the processes of a SITL swarm (zenoh-runtime's ZENOH_RUNTIME syntax):
-# one thread instead of five or six. Dozens of processes on a few cores then spend
-# less CPU handing each message between threads (30 robots: neighbour-state age p99 25 ms
-# instead of 44 in an A/B pair of runs). A ZENOH_RUNTIME in the launcher's environment wins.
-ZENOH_RUNTIME = ("(rx: (worker_threads: 1), app: (handover: rx), tx: (handover: rx), "
-                 "acc: (handover: rx), net: (handover: rx))")
+# Zenoh's runtime for the agents, plants and launcher of a SITL swarm: one thread instead of
+# five or six. Dozens of processes on a few cores then spend less CPU handing each message
+# between threads (30 robots: neighbour-state age p99 25 ms instead of 44 in an A/B pair of
+# runs). A ZENOH_RUNTIME in the launcher's environment wins (not for the router: its own).
+ZENOH_RUNTIME = zenoh_runtime(1)
 
 
 class SitlError(RuntimeError):
@@ -85,6 +86,7 @@ class SitlOptions:
     lead_time: float = 1.5              # s between the mission message and its epoch
     live: bool = True                   # live status table on a terminal
     robot_profile: str | None = None    # absolute path of the robot profile the plants use
+    launch: LaunchSettings = field(default_factory=LaunchSettings)   # router, age bound
 
 
 @dataclass
@@ -96,6 +98,7 @@ class SitlRun:
     killed: dict = field(default_factory=dict)    # robot id -> mission time [s] of its kill
     agent_stats: dict = field(default_factory=dict)
     plant_stats: list = field(default_factory=list)
+    recorded: dict = field(default_factory=dict)  # robot id -> states in the recording
 
 
 def free_tcp_port() -> int:
@@ -166,15 +169,16 @@ def _status_table(sc: Scenario, states: Mapping[int, Received[StateMsg]],
 
 
 class _Closable(Protocol):
-    """What run_sitl opens on its router and closes at the end, in reverse order."""
+    """What run_sitl opens on its Zenoh session and closes at the end, in reverse order."""
 
     def close(self) -> None: ...
 
 
 def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> SitlRun:
-    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. Its
-    processes inherit ZENOH_RUNTIME; the launcher's own router takes it too if its Zenoh has
-    not started yet (the variable is read once per process)."""
+    """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. The
+    router runs in a process of its own (hil.sitl_launch), ended last; the launcher is a
+    client of it. Its processes inherit ZENOH_RUNTIME (the router: its own); the launcher's
+    Zenoh takes it too if it has not started yet (the variable is read once per process)."""
     os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     out.mkdir(parents=True, exist_ok=True)
     run = SitlRun()
@@ -182,18 +186,26 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
     keys = Keys(swarm)
     port = opts.zenoh_port or free_tcp_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    router = open_session(session_config("router", listen=[endpoint]), "the SITL router")
+    config_dir = out / "config"
+    config_dir.mkdir(exist_ok=True)
+    router_child = Children(out / "logs")
+    try:
+        router_pid = start_router(router_child, endpoint, config_dir, opts.launch).pid
+        router = open_launcher_session(endpoint, opts.launch)
+    except BaseException:
+        router_child.terminate_all()
+        raise
     opened: list[_Closable] = []
     try:
-        recorder = Recorder(router, keys, out / "run.mcap")
+        # a minute of a 50-robot swarm's samples: the recorder thread (normal scheduling) may
+        # fall far behind while the agents run, the launcher's Zenoh threads never do
+        recorder = Recorder(router, keys, out / "run.mcap", capacity=1 << 17)
         opened.append(recorder)
         presence = Presence(router, keys)
         opened.append(presence)
         truth = Latest(router, keys.truth("*"), TruthMsg.decode, time.time)
         states = Latest(router, keys.state("*"), StateMsg.decode, time.time)
         opened += [truth, states]
-        config_dir = out / "config"
-        config_dir.mkdir(exist_ok=True)
         if opts.gcs_port:
             router_mav = MavlinkRouter(free_udp_port(), opts.gcs_port).start()
             opened.append(router_mav)
@@ -207,7 +219,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                     for i in range(len(sc.ids))]
         for s in settings:
             (config_dir / f"robot_{s.robot_id}.toml").write_text(to_toml(s))
-        _write_manifest(out, sc, settings, endpoint, swarm)
+        _write_manifest(out, sc, settings, endpoint, swarm, {"router": router_pid})
 
         with Children(out / "logs") as children:
             _start_plants(children, sc, opts, swarm, endpoint, out)
@@ -223,7 +235,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                     ["agent", "--config", str(config_dir / f"robot_{s.robot_id}.toml"),
                      "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")])
             _write_manifest(out, sc, settings, endpoint, swarm,
-                            {c.name: c.pid for c in children.children})
+                            {"router": router_pid, **{c.name: c.pid for c in children.children}})
             console.print(f"{len(agents)} agents starting ...")
             if not wait_until(lambda: presence.alive() >= ids or children.failed(),
                               opts.startup_timeout) or children.failed():
@@ -237,11 +249,14 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             console.print(f"mission published; t = 0 at epoch {run.epoch:.3f}")
             _watch(sc, run, children, agents, router, keys, mission, truth, states, presence,
                    opts, console)
-            # clean stop: agents first (zero velocity, IDLE), then the plants
-            for child in agents.values():
-                if child.proc.poll() is None:
-                    children.terminate(child)
+            # clean stop: agents first, all at once (zero velocity, IDLE), then the plants
+            children.terminate_together(list(agents.values()))
             children.terminate_all()
+        recorder.settle()             # what they published before they ended has arrived
+        recorder.close()
+        for key, n in recorder.recorded_per_key.items():
+            if key.endswith("/state") and (rid := Keys.robot_id_of(key)) is not None:
+                run.recorded[rid] = n
         for s in settings:
             path = out / "logs" / f"agent_{s.robot_id}.json"
             if path.exists():
@@ -253,6 +268,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
         for thing in reversed(opened):
             thing.close()
         router.close()
+        router_child.terminate_all()
 
 
 def _failure(what: str, children: Children) -> str:
@@ -301,6 +317,7 @@ def _write_manifest(out: Path, sc: Scenario, settings: list[AgentSettings], endp
     tmp = out / "manifest.json.tmp"
     tmp.write_text(json.dumps(
         {"version": 1, "scenario": sc.name, "swarm": swarm, "zenoh_router": endpoint,
+         "router_pid": pids.get("router"),
          "plants": {k: v for k, v in pids.items() if k.startswith("plant")},
          "robots": robots}, indent=2) + "\n")
     tmp.replace(out / "manifest.json")

@@ -46,6 +46,10 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--near-radius", type=float, default=0.0, metavar="M",
                    help="agents take full-rate states only from robots within M metres "
                         "and 5 Hz beacons from the rest (0: every robot at full rate)")
+    from common.schema import add_arguments
+    from hil.sitl_launch import LaunchSettings
+    add_arguments(p.add_argument_group("data path (the router's process) and age bound"),
+                  LaunchSettings)
     p.set_defaults(func=run)
 
 
@@ -73,11 +77,13 @@ def _mavlink_key(path: str | None) -> str | None:
 def run(args: argparse.Namespace, console: Console) -> int:
     """Check the options, run the swarm, turn its recording into metrics and figures."""
     from agent.settings import near_radius_problem
+    from common.schema import ConfigError, section_from_args
     from hil import run_folder
     from hil.figures import draw_figures
     from hil.robot_profile import SITL_DEFAULT, load_robot_profile
     from hil.scenario import load_scenario
     from hil.sitl import SitlError, SitlOptions, run_sitl
+    from hil.sitl_launch import LaunchSettings
     from hil.sitl_report import analyse_recording
     sc = load_scenario(args.scenario)
     if args.duration:
@@ -89,8 +95,12 @@ def run(args: argparse.Namespace, console: Console) -> int:
         sc = dataclasses.replace(sc, robot=load_robot_profile(profile))
         console.print(f"robot: {profile}")
     out = Path(args.out)
+    try:
+        launch = section_from_args(LaunchSettings, args)
+    except ConfigError as exc:
+        raise BadInput(str(exc)) from None
     opts = SitlOptions(can_interface=args.can_interface, can_channel=args.can_channel,
-                       can_base_port=args.can_base_port,
+                       can_base_port=args.can_base_port, launch=launch,
                        robots_per_plant=args.robots_per_plant, live=not args.no_live,
                        gcs_port=args.gcs_port, near_radius=args.near_radius,
                        mavlink_key=_mavlink_key(args.mavlink_key),
@@ -125,6 +135,17 @@ def run(args: argparse.Namespace, console: Console) -> int:
     console.print(f"deadline misses: {s['deadline_misses_in_mission']} in the mission, "
                   f"{s['deadline_misses']} in all (start-up included), watchdog trips: "
                   f"{sum(s['watchdog_trips'].values())}, lost: {s['lost_processes'] or 'none'}")
+    if (worst := s["neighbour_age_worst"]) and worst["p99_ms"] > launch.age_bound * 1e3:
+        console.print(f"[yellow]warning: neighbour data too old: robot {worst['robot']}'s "
+                      f"neighbour-state age p99 is {worst['p99_ms']:.0f} ms, above the bound "
+                      f"of {launch.age_bound * 1e3:g} ms (--age-bound); its oldest 1 % spent "
+                      f"most of it in {describe_stage(worst)}: the safety governor brakes "
+                      f"on such data, so this run says more about this machine than about "
+                      f"the swarm[/yellow]")
+    if (missing := s["recording"]["states_missing"]):
+        console.print(f"[yellow]warning: the recording lacks {sum(missing.values())} of the "
+                      f"{s['recording']['states_published']} states published "
+                      f"(per robot: {missing})[/yellow]")
     if s["deadline_misses_in_mission"]:
         console.print(f"[yellow]warning: {s['deadline_misses_in_mission']} control periods "
                       f"missed in the mission: this machine could not run {len(sc.ids)} agents "
@@ -148,6 +169,49 @@ def describe_world(world: WorldParams) -> str:
     return f"{', '.join(parts)} (seed {world.seed})" if parts else "ideal"
 
 
+STAGE_NAMES = {"publish_to_router": "publish -> router (the publishing agent's process and "
+                                     "its link)",
+               "router_to_agent": "router -> the agent's ring (the router and the receiving "
+                                   "process)",
+               "in_agent": "the agent, held while no newer state came (a beacon-only "
+                           "neighbour, or newer states lost or late on the way)"}
+
+
+def describe_stage(worst: dict) -> str:
+    """The stage that made the worst agent's oldest data old, with its mean there [ms]."""
+    stage = worst["stage"]
+    if stage is None:
+        return "an unknown stage (no router timestamps)"
+    return f"{STAGE_NAMES[stage]}, {worst['stage_tail_ms'][stage]:.0f} ms on average"
+
+
+def worst_age(agent_stats: dict) -> dict | None:
+    """The agent whose neighbour-state age p99 [ms] is the highest, and ``stage``: of
+    agent.node.AGE_STAGES, the one that took most of its oldest 1 % (None without router
+    timestamps)."""
+    ages = {r: st["agent"]["neighbour_age_ms"]["p99"] for r, st in agent_stats.items()
+            if st["agent"]["neighbour_age_ms"]["p99"] is not None}
+    if not ages:
+        return None
+    rid = max(ages, key=lambda r: ages[r])
+    stages = agent_stats[rid]["agent"]["neighbour_age_stages_ms"]
+    tails = {k: v["tail"] for k, v in (stages or {}).items() if v["tail"] is not None}
+    return {"robot": rid, "p99_ms": ages[rid],
+            "stage": max(tails, key=lambda k: tails[k]) if tails else None,
+            "stage_tail_ms": tails}
+
+
+def recording_check(run: SitlRun) -> dict[str, Any]:
+    """States published by the agents that reported, recorded, and missing per robot (only
+    robots with missing states are listed)."""
+    published = {r: st["zenoh"]["published"] for r, st in run.agent_stats.items()}
+    missing = {r: n - run.recorded.get(r, 0) for r, n in published.items()
+               if n > run.recorded.get(r, 0)}
+    return {"states_published": sum(published.values()),
+            "states_recorded": sum(run.recorded.get(r, 0) for r in published),
+            "states_missing": missing}
+
+
 def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> dict[str, Any]:
     """The ``sitl`` block of metrics.json: loops, links, drivers and CPU of every process."""
     from hil.sitl_report import missed_in
@@ -168,6 +232,10 @@ def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> d
         "compute_p99_ms_per_agent": {r: lp["compute"]["p99_ms"] for r, lp in loops.items()},
         "neighbour_age_ms": {r: st["agent"]["neighbour_age_ms"]
                              for r, st in run.agent_stats.items()},
+        "neighbour_age_stages_ms": {r: st["agent"]["neighbour_age_stages_ms"]
+                                    for r, st in run.agent_stats.items()},
+        "neighbour_age_worst": worst_age(run.agent_stats),
+        "recording": recording_check(run),
         "failsafes": {r: st["failsafe"] for r, st in run.agent_stats.items() if st["failsafe"]},
         "agent_deadlocks": {r: st["agent"]["deadlocks"] for r, st in run.agent_stats.items()
                             if st["agent"]["deadlocks"]},

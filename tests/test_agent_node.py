@@ -275,3 +275,26 @@ def test_a_cart_brakes_for_a_dead_robot_through_its_governor():
     assert closest > agent.s.control.a
     assert agent.counters.governed > 0 and flagged
     assert agent.counters.summary()["governor_min_allowed"] < cart.v_wheel_max
+
+
+def test_neighbour_age_is_split_into_stages_and_the_tail_names_the_slow_one():
+    from agent.node import AgentCounters, _stages
+    from common.payloads import Received, StateMsg
+    msg = StateMsg(2, 1, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, StateFlags(0))
+    assert _stages(Received(msg, 10.03, 10.01), 10.05) == pytest.approx((0.01, 0.02, 0.02))
+    c = AgentCounters()
+    for k in range(400):
+        stages = _stages(Received(msg, 10.006 + (0.3 if k % 50 == 0 else 0.0), 10.001), 10.0)
+        stages = (stages[0], stages[1], 0.002)
+        c.neighbour_age.append(sum(stages))
+        c.age_stages.append(stages)
+    s = c.summary()["neighbour_age_stages_ms"]
+    # 8 of 400 uses waited 300 ms more between router and agent: they are the oldest 1 %
+    assert s["router_to_agent"]["tail"] == pytest.approx(305.0)
+    assert s["publish_to_router"]["tail"] == pytest.approx(1.0)
+    assert s["in_agent"]["p50"] == pytest.approx(2.0)
+    # without router timestamps (another transport, a fake) the stages are unknown
+    bare = AgentCounters()
+    bare.neighbour_age.append(0.01)
+    bare.age_stages.append(_stages(Received(msg, 10.0), 10.01))
+    assert bare.summary()["neighbour_age_stages_ms"] is None

@@ -42,7 +42,8 @@ class Launcher:
     def pids(self) -> list[int]:
         m = self.manifest()
         return [p for p in list(m.get("plants", {}).values())
-                + [r.get("pid") for r in m.get("robots", {}).values()] if p]
+                + [r.get("pid") for r in m.get("robots", {}).values()]
+                + [m.get("router_pid")] if p]
 
     def wait(self, timeout: float) -> tuple[int, str]:
         out, _ = self.proc.communicate(timeout=timeout)
@@ -88,6 +89,14 @@ def test_sitl_paper_scenario(launch):
     s = m["sitl"]
     assert sum(s["watchdog_trips"].values()) == 0 and s["lost_processes"] == {}
     assert s["agents_reporting"] == 9
+    # the router ran in a process of its own; the recording holds every state published;
+    # each agent's neighbour-state age is split into stages (router timestamps)
+    assert run.manifest()["router_pid"]
+    assert s["recording"]["states_published"] > 9 * 12 * 50 * 0.9
+    assert s["recording"]["states_missing"] == {}, s["recording"]
+    assert set(s["neighbour_age_stages_ms"]["1"]) == {"publish_to_router", "router_to_agent",
+                                                     "in_agent"}
+    assert s["neighbour_age_worst"]["stage"] in s["neighbour_age_stages_ms"]["1"]
     # the agents' loops run SCHED_FIFO (sitl's default): runs miss no period in the mission,
     # but for a stall of this shared VM that delays every process at once (up to some 60 ms:
     # a few periods each; a loop that cannot keep up misses tens to hundreds);
@@ -124,6 +133,50 @@ def test_mission_misses_are_the_overruns_between_epoch_and_end():
     assert missed_in({"overrun_events": []}, 100.0, 110.0) == 0
     # beyond the loop's event log: when is unknown, so they count as in the mission
     assert missed_in({**loop, "overruns_unlogged": 4}, 100.0, 110.0) == 7
+
+
+def agent_stats(p99: float, tails: dict | None, published: int = 100) -> dict:
+    stages = ({k: {"p50": 1.0, "p99": 2.0, "tail": v} for k, v in tails.items()}
+              if tails is not None else None)
+    return {"agent": {"neighbour_age_ms": {"p50": 1.0, "p99": p99, "count": 10},
+                      "neighbour_age_stages_ms": stages},
+            "zenoh": {"published": published}}
+
+
+def test_the_worst_agent_and_the_stage_of_its_oldest_data():
+    from hil.sitl_cli import describe_stage, worst_age
+    stats = {1: agent_stats(20.0, {"publish_to_router": 1.0, "router_to_agent": 3.0,
+                                   "in_agent": 2.0}),
+             2: agent_stats(90.0, {"publish_to_router": 2.0, "router_to_agent": 80.0,
+                                   "in_agent": 5.0}),
+             3: agent_stats(40.0, None)}
+    worst = worst_age(stats)
+    assert worst["robot"] == 2 and worst["p99_ms"] == 90.0
+    assert worst["stage"] == "router_to_agent"
+    assert "router -> the agent's ring" in describe_stage(worst) and "80 ms" in describe_stage(
+        worst)
+    # without router timestamps the stage is unknown, and said so
+    none = worst_age({3: agent_stats(40.0, None)})
+    assert none["stage"] is None and "unknown" in describe_stage(none)
+    assert worst_age({}) is None
+
+
+def test_missing_states_are_counted_per_robot():
+    from hil.sitl import SitlRun
+    from hil.sitl_cli import recording_check
+    run = SitlRun(agent_stats={1: agent_stats(1.0, None, 100), 2: agent_stats(1.0, None, 50)},
+                  recorded={1: 100, 2: 47})
+    assert recording_check(run) == {"states_published": 150, "states_recorded": 147,
+                                    "states_missing": {2: 3}}
+
+
+def test_a_bad_router_setting_is_refused_naming_the_flag(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "hil.cli", "sitl",
+                           str(SCENARIOS / "sitl_small.toml"), "--out", str(tmp_path / "run"),
+                           "--router-threads", "0"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert "--router-threads" in proc.stderr and not (tmp_path / "run").exists()
 
 
 def test_sigkill_of_an_agent_and_malformed_payloads(launch):

@@ -1,4 +1,5 @@
 """Zenoh link over a router on loopback (scouting off): keys, latest values, presence."""
+import math
 import threading
 import time
 
@@ -203,3 +204,52 @@ def test_a_client_waits_for_a_router_that_starts_after_it():
         for r in routers:
             r.close()
     assert routers
+
+
+def test_a_state_carries_its_routers_timestamp_and_publications_are_counted(sessions):
+    from transport.zenoh_link import SwarmLink
+    a, b = sessions
+    keys = Keys("t")
+    one = SwarmLink(a, keys, 1, time.time)
+    got = Latest(b, keys.state("*"), StateMsg.decode, time.time)
+    try:
+        time.sleep(0.3)
+        t0 = time.time()
+        one.publish(state(1, 1, t0))
+        assert wait_until(lambda: 1 in got.snapshot(), 5.0, poll=0.01)
+        rec = got.snapshot()[1]
+        # one machine, one clock: published, then routed, then taken (1 ms for rounding)
+        assert rec.routed is not None
+        assert t0 - 1e-3 <= rec.routed <= rec.received + 1e-3
+        assert one.counters()["published"] == 1
+    finally:
+        got.close()
+        one.close()
+
+
+def test_a_robot_closing_in_fast_is_followed_at_full_rate_before_it_is_near(sessions):
+    """12 m away, radius 10, from one driving east at 3 m/s: a robot coming at 3 m/s from
+    the east is subscribed to (they may close 2.4 m before its states flow), one beside it
+    driving east as fast is not."""
+    from transport.zenoh_link import SwarmLink
+
+    a, b = sessions
+    keys = Keys("lead")
+    me = SwarmLink(a, keys, 1, time.time, near_radius=10.0)
+    fast, along = SwarmLink(b, keys, 2, time.time), SwarmLink(b, keys, 3, time.time)
+    try:
+        time.sleep(0.3)
+        end = time.monotonic() + 1.5
+        seq = 0
+        while time.monotonic() < end:
+            seq += 1
+            for link, rid, x, y, theta in ((fast, 2, 12.0, 0.0, math.pi),
+                                           (along, 3, 0.0, 12.0, 0.0), (me, 1, 0.0, 0.0, 0.0)):
+                link.publish(StateMsg(rid, seq, time.time(), x, y, theta, 3.0, 0.0, 0.0, 0.0, 0,
+                                      StateFlags(0)))
+            me.neighbours()
+            time.sleep(0.02)
+        assert me.counters()["near"] == [2]
+    finally:
+        for link in (me, fast, along):
+            link.close()

@@ -45,7 +45,8 @@ class ZenohSettings:
     config: str | None = setting(None, doc="a Zenoh JSON5 config file (TLS...), relative to the "
                                  "agent config's folder; replaces mode, connect and listen")
     near_radius: float = setting(0.0, unit="m", doc="> 0: full-rate states only from robots "
-                                 "this near, beacons from the others (0: every robot)", lo=0.0)
+                                 "this near or closing in to be so, beacons from the others "
+                                 "(0: every robot)", lo=0.0)
 
     def __post_init__(self) -> None:
         validate(self)

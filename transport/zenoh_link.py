@@ -196,7 +196,9 @@ class Latest(Generic[M]):
                 self.dropped["out_of_order"] += 1
                 continue
             self.accepted += 1
-            latest[rid] = Received(msg, now)
+            ts = sample.timestamp            # the router's, when it timestamps (its default)
+            latest[rid] = Received(msg, now,
+                                   ts.get_time_as_ntp64().as_nanos() * 1e-9 if ts else None)
         if latest is not None:
             self._latest = MappingProxyType(latest)
 
@@ -316,22 +318,28 @@ class NearStates:
     """Neighbour states for a large swarm: all beacons, full-rate states of the robots near.
 
     A thread of its own revises the subscriptions every ``period`` [s] around the position
-    last given to :meth:`focus` (metres, world frame): it subscribes to the state key of each
-    robot last seen within ``radius`` and drops the subscription of robots beyond ``radius +
-    hysteresis``. Declaring and undeclaring take Zenoh's locks, which its (normally
-    scheduled) threads may hold, so the real-time loop never does it. :meth:`snapshot` is
-    like :meth:`Latest.snapshot`: per robot, the newer of its beacon and its state, a
-    mapping never mutated afterwards.
+    and velocity last given to :meth:`focus` (metres, world frame; m/s): it subscribes to the
+    state key of each robot that is, or may be, within ``radius`` by the time its full-rate
+    states flow, and drops the subscription of robots beyond ``radius + hysteresis``. "May
+    be": its last known distance less how far the two robots can close in on each other (the
+    norm of their velocities' difference, as reported) over that data's age plus ``lead``
+    [s] (a refocus period, a beacon period and the subscription's set-up), so that a robot
+    closing in fast is followed at full rate before it is within ``radius``, not on 5 Hz
+    beacons, while robots moving together in formation are not. Declaring and undeclaring
+    take Zenoh's locks, which its (normally scheduled) threads may hold, so the real-time
+    loop never does it. :meth:`snapshot` is like :meth:`Latest.snapshot`: per robot, the
+    newer of its beacon and its state, a mapping never mutated afterwards.
     """
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int,
                  clock: Callable[[], float], radius: float, hysteresis: float = 2.0,
-                 period: float = 0.1, thread_setup: Callable[[], object] | None = None):
+                 period: float = 0.1, lead: float = 0.4,
+                 thread_setup: Callable[[], object] | None = None):
         """``thread_setup`` runs first in the refocus thread (e.g. the loop's real-time
         scheduling, so that a thread taking the interpreter lock is never starved while the
         loop waits for it)."""
         self._session, self._keys, self._clock = session, keys, clock
-        self.radius, self.hysteresis = radius, hysteresis
+        self.radius, self.hysteresis, self.lead = radius, hysteresis, lead
         self.beacons = Latest(session, keys.beacon("*"), StateMsg.decode, clock,
                               ignore=[robot_id])
         # replaced whole (never mutated) by the refocus thread, read by the loop
@@ -340,15 +348,16 @@ class NearStates:
         self._closed: dict[str, Any] = {"received": 0, "accepted": 0, "dropped": Counter()}
         self._counter_lock = threading.Lock()
         self._snapshot: Mapping[int, Received[StateMsg]] = MappingProxyType({})
-        self._focus: tuple[float, float] | None = None
+        self._focus: tuple[float, float, float, float] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._refocus_loop, args=(period, thread_setup),
                                         name=f"near-refocus-{robot_id}", daemon=True)
         self._thread.start()
 
-    def focus(self, x: float, y: float) -> None:
-        """Own position [m] to revise the near set around (cheap, never blocks)."""
-        self._focus = (x, y)
+    def focus(self, x: float, y: float, vx: float = 0.0, vy: float = 0.0) -> None:
+        """Own position [m] and velocity [m/s] to revise the near set around (cheap, never
+        blocks)."""
+        self._focus = (x, y, vx, vy)
 
     def snapshot(self) -> Mapping[int, Received[StateMsg]]:
         near = self.near
@@ -367,13 +376,19 @@ class NearStates:
             except zenoh.ZError:                # e.g. the session closing: try again later
                 log.exception("near set not revised")
 
-    def refocus(self, x: float, y: float) -> None:
-        """Subscribe to the robots now near (x, y) [m], drop those gone far."""
+    def refocus(self, x: float, y: float, vx: float = 0.0, vy: float = 0.0) -> None:
+        """Subscribe to the robots now near (x, y) [m] for a robot moving at (vx, vy) [m/s],
+        drop those gone far."""
         near = dict(self.near)
         new, gone = [], []
+        now = self._clock()
         try:
             for rid, rec in self._snapshot.items():
-                d = ((rec.msg.x - x) ** 2 + (rec.msg.y - y) ** 2) ** 0.5
+                m = rec.msg
+                relative = math.hypot(m.v * math.cos(m.theta) - vx,
+                                      m.v * math.sin(m.theta) - vy)
+                closing = relative * (max(now - m.stamp, 0.0) + self.lead)
+                d = ((m.x - x) ** 2 + (m.y - y) ** 2) ** 0.5 - closing
                 if rid not in near and d <= self.radius:
                     near[rid] = Latest(self._session, self._keys.state(rid), StateMsg.decode,
                                        self._clock, capacity=8)
@@ -428,6 +443,7 @@ class SwarmLink:
         self._pub = session.declare_publisher(keys.state(robot_id))
         self._beacon = session.declare_publisher(keys.beacon(robot_id))
         self._beacon_due = 0.0
+        self.published = 0             # states put (beacons apart)
         self._token = session.liveliness().declare_token(keys.robot(robot_id))
         self.states: Latest[StateMsg] | NearStates = (
             NearStates(session, keys, robot_id, clock, near_radius,
@@ -439,13 +455,15 @@ class SwarmLink:
     def publish(self, state: StateMsg) -> None:
         payload = state.encode()
         self._pub.put(payload)
+        self.published += 1
         # schedules only: a step of the wall clock must not stall them
         now = time.monotonic()
         if now >= self._beacon_due:
             self._beacon.put(payload)
             self._beacon_due = now + self.BEACON_PERIOD
         if isinstance(self.states, NearStates):
-            self.states.focus(state.x, state.y)
+            self.states.focus(state.x, state.y, state.v * math.cos(state.theta),
+                              state.v * math.sin(state.theta))
 
     def neighbours(self) -> Mapping[int, Received[StateMsg]]:
         return self.states.snapshot()
@@ -459,7 +477,8 @@ class SwarmLink:
         return got.msg if got else None
 
     def counters(self) -> dict:
-        out: dict[str, object] = {"states": self.states.counters(),
+        out: dict[str, object] = {"published": self.published,
+                                  "states": self.states.counters(),
                                   "obstacles": self._obstacles.counters(),
                                   "mission": self._mission.counters()}
         if isinstance(self.states, NearStates):

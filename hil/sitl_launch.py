@@ -1,0 +1,78 @@
+"""How the SITL launcher hosts a swarm's data path: the Zenoh router in a process of its own.
+
+The router is the one hop every neighbour state takes. Hosted in the launcher, it shared a
+process (and the interpreter lock, and normal scheduling) with the MCAP recorder and the
+status views, and ran under the agents' real-time loops: on a loaded machine a state then
+waited there for hundreds of milliseconds. Here the router is ``boundswarm router`` started
+as a child with its own runtime threads and SCHED_FIFO priority; the launcher is one more
+client of it (recorder, status, mission), like any ground station.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from agent.loop import use_normal_scheduling, use_realtime
+from common.schema import setting, validate
+from hil.processes import Child, Children
+from transport.zenoh_link import open_session, session_config
+
+
+def zenoh_runtime(threads: int) -> str:
+    """A ZENOH_RUNTIME (zenoh-runtime's syntax) that runs every runtime of a process on
+    ``threads`` worker threads: a process of a SITL swarm spends less CPU handing each
+    message between threads than with Zenoh's five or six runtimes."""
+    return (f"(rx: (worker_threads: {threads}), app: (handover: rx), tx: (handover: rx), "
+            "acc: (handover: rx), net: (handover: rx))")
+
+
+@dataclass(frozen=True)
+class LaunchSettings:
+    """The SITL launcher's data path and the bound its summary checks."""
+
+    router_priority: int = setting(9, doc="SCHED_FIFO priority of the Zenoh router process "
+                                   "and of the launcher's Zenoh threads (0: normal "
+                                   "scheduling); 9: with the agents' Zenoh threads, under "
+                                   "their loops (10)", lo=0, hi=99)
+    router_threads: int = setting(2, doc="Zenoh runtime worker threads of the router",
+                                  lo=1, hi=16)
+    age_bound: float = setting(0.05, unit="s", doc="the summary warns when an agent's "
+                               "neighbour-state age p99 exceeds this", lo=0.0, open_lo=True,
+                               hi=10.0)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+def router_config(endpoint: str) -> dict:
+    """The router's Zenoh config (JSON, which is JSON5): only ``endpoint``, scouting off."""
+    return {"mode": "router", "listen": {"endpoints": [endpoint]},
+            "connect": {"endpoints": []}, "scouting": {"multicast": {"enabled": False}}}
+
+
+def start_router(children: Children, endpoint: str, config_dir: Path,
+                 launch: LaunchSettings) -> Child:
+    """Write ``config_dir/router.json5`` and start ``boundswarm router`` on it as child
+    ``router``, with its own runtime threads and scheduling."""
+    path = config_dir / "router.json5"
+    path.write_text(json.dumps(router_config(endpoint), indent=2) + "\n")
+    args = ["router", "--config", str(path)]
+    if launch.router_priority:
+        args += ["--realtime-priority", str(launch.router_priority)]
+    return children.start("router", args,
+                          env={"ZENOH_RUNTIME": zenoh_runtime(launch.router_threads)})
+
+
+def open_launcher_session(endpoint: str, launch: LaunchSettings) -> zenoh.Session:
+    """The launcher's client session to the router at ``endpoint``: Zenoh's threads, started
+    with it, inherit SCHED_FIFO at ``launch.router_priority`` (when granted); the calling
+    thread goes back to normal scheduling."""
+    realtime = launch.router_priority > 0 and use_realtime(launch.router_priority)
+    try:
+        return open_session(session_config("client", connect=[endpoint]), "the SITL launcher")
+    finally:
+        if realtime:
+            use_normal_scheduling()
