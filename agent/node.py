@@ -453,8 +453,8 @@ class Agent:
                       obs: ObstaclesMsg | None, now_w: float
                       ) -> tuple[InRange, list[float], list[float], list[float]]:
         """Neighbours in range [m] (extrapolated to now) and obstacles' centres and radii
-        [m] (the detections ``obs``), stale robots included as static obstacles at their
-        last position: the governor's disc of a silent robot less a, at least a/2."""
+        [m] (the detections ``obs``), stale robots included as static obstacles of radius
+        a/2 at their last position."""
         me = self.s.robot_id
         recs = [r for rid, r in neighbours.items() if rid != me]
         near = in_range([r.msg for r in recs], pose[0], pose[1], now_w,
@@ -465,12 +465,7 @@ class Agent:
                                 obs.radii.tolist()) if obs is not None else ([], [], []))
         obs_x += near.stale_x
         obs_y += near.stale_y
-        a = self.s.control.a
-        half_base, disc = self._disc_args()
-        for rid in near.stale_id:
-            m = neighbours[rid].msg
-            full, _ = neighbour_hazard(m.v, half_base * m.u, now_w - m.stamp, *disc)
-            obs_r.append(max(a / 2, full - a))
+        obs_r += [self.s.control.a / 2] * len(near.stale_x)
         return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:

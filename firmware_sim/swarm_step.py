@@ -209,14 +209,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             for q in range(m):
                 status = seen[nbr_j[q], 2]
                 if status == STALE:
-                    # the governor's silent disc, less a (the law keeps b from its surface)
-                    j = nbr_j[q]
-                    full, _ = neighbour_hazard(view[j, 3], 0.5 * view[j, 4] * p.wheel_base,
-                                               t - view[j, 5], a, p.accel, top_speed,
-                                               staleness, share_age, stop_time)
                     if k < cap:
-                        o_x[k], o_y[k], o_k[k] = nbr_x[q], nbr_y[q], -1
-                        o_r[k] = max(stale_radius, full - a)
+                        o_x[k], o_y[k], o_r[k], o_k[k] = nbr_x[q], nbr_y[q], stale_radius, -1
                     k += 1
                 elif status == FRESH:
                     nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]
