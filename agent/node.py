@@ -286,7 +286,12 @@ class Agent:
             reason = "driver feedback lost"
         elif not fresh.closed_loop:
             reason = "drivers not in closed loop control"
-        if reason and self.failsafe is None:
+        if reason:
+            self._enter_failsafe(reason)
+
+    def _enter_failsafe(self, reason: str) -> None:
+        """The first failsafe sticks: HOLD, say why."""
+        if self.failsafe is None:
             self.failsafe = reason
             self.counters.failsafes += 1
             if self.mode is AgentMode.FORMATION:
@@ -318,12 +323,8 @@ class Agent:
     def _check_fix(self) -> None:
         """Failsafe HOLD when the pose source's fix is missing or too old."""
         reason = self.pose_problem()
-        if reason and self.failsafe is None:
-            self.failsafe = reason
-            self.counters.failsafes += 1
-            if self.mode is AgentMode.FORMATION:
-                self.mode = AgentMode.HOLD
-            log.critical("robot %d failsafe: %s; holding", self.s.robot_id, reason)
+        if reason:
+            self._enter_failsafe(reason)
 
     def _formation_place(self, mission: MissionMsg) -> Formation | None:
         key = (mission.seq, mission.stamp)
@@ -357,16 +358,19 @@ class Agent:
                                 now_w)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
-        held = [1.0 if rid in self._held else 0.0 for rid in near.fresh_id]
+        per_pair = self._law_params.pair_hysteresis
+        held = [1.0 if rid in self._held else 0.0 for rid in near.fresh_id] if per_pair \
+            else [0.0] * len(near.fresh_x)
         v, u, mode, governed, self.memory = law_step(
             *pose, rx, ry, rvx, rvy, near.fresh_x, near.fresh_y, held, obs_x, obs_y, obs_r,
             *hazards, self.memory, self._law_params, max(dt, 1e-6))
-        self._held = set()
-        for rid, nx, ny, h in zip(near.fresh_id, near.fresh_x, near.fresh_y, held):
-            dx, dy = nx - pose[0], ny - pose[1]
-            if pair_active(dx * dx + dy * dy, h > 0.5, self.s.control.b,
-                           self.s.control.hysteresis):
-                self._held.add(rid)
+        if per_pair:       # the pairs' memory, as the law applied it
+            b, h = self.s.control.b, self.s.control.hysteresis
+            self._held = set()
+            for rid, nx, ny, was in zip(near.fresh_id, near.fresh_x, near.fresh_y, held):
+                dx, dy = nx - pose[0], ny - pose[1]
+                if pair_active(dx * dx + dy * dy, was > 0.5, b, h):
+                    self._held.add(rid)
         self._watch_progress((now_m, math.hypot(pose[0] - rx, pose[1] - ry),
                               tolerance(math.hypot(rvx, rvy), self.s.control.K)))
         self.law_mode = Mode(mode)
