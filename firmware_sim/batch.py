@@ -28,7 +28,9 @@ from agent.law import LawParams
 from agent.progress import TOLERANCE_MARGIN
 from agent.settings import TimeoutSettings
 from firmware_sim import compiled, swarm_step, world_step
+from firmware_sim.batch_pose import BatchPoseSource
 from firmware_sim.metrics import RunMetrics
+from firmware_sim.mocap_sim import MocapParams
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles, WorldParams
 
@@ -105,10 +107,13 @@ PARALLEL_MIN = 500   # robots; below, waking threads costs more than it saves
 def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacles: Obstacles,
              control: ControlParams, robot: RobotParams, options: SimOptions,
              world: WorldParams | None = None,
+             mocap: MocapParams | None = None,
              progress: Callable[[float], None] | None = None,
              clock: Callable[[], float] | None = None) -> SimResult:
     """Run the swarm from ``poses0`` (N, 3) for ``options.duration`` seconds in ``world``
-    (None: the ideal world).
+    (None: the ideal world). ``mocap``: the robots' pose is their odometry fused with
+    simulated motion-capture fixes (:mod:`firmware_sim.batch_pose`; only where the world
+    makes odometry wrong: wheel slip or encoder noise).
 
     ``progress`` is called with the completed fraction about a hundred times; ``clock``
     (e.g. ``time.perf_counter``) is used, when given, to time sensing and the law for
@@ -166,7 +171,7 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     dmin, cmin, who = np.zeros(S + 1), np.zeros(S + 1), np.zeros((S + 1, 4), np.int64)
     watch_j, watch_k = np.empty((n, watch_cap), np.int64), np.empty((n, watch_cap), np.int64)
     hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
-    w = _WorldState(world, n, ids, pose, T, control, robot, ideal, k)
+    w = _WorldState(world, n, ids, pose, T, control, robot, ideal, k, mocap)
     for step in range(steps + 1):
         t = step * T
         t0 = clock() if clock else 0.0
@@ -241,6 +246,8 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     if progress:
         progress(1.0)
     metrics.killed = sorted(k_.robot for k_ in world.kill if k_.at <= options.duration)
+    if w.pose_source is not None:
+        metrics.pose_holds = sorted(int(r) for r in ids[w.pose_source.held])
     return SimResult(ids=ids, t=rec_t, pose=rec_pose, v=rec_v, u=rec_u, mode=rec_mode,
                      governed=rec_gov,
                      ref=rec_ref, metrics=metrics, law_seconds=law_seconds)
@@ -252,8 +259,11 @@ class _WorldState:
 
     def __init__(self, world: WorldParams, n: int, ids: np.ndarray, pose: np.ndarray,
                  period: float, control: ControlParams, robot: RobotParams, ideal: bool,
-                 k: types.SimpleNamespace):
+                 k: types.SimpleNamespace, mocap: MocapParams | None = None):
         self.world, self.period, self.k = world, period, k
+        self.pose_source = (BatchPoseSource(mocap, ids, pose, period, robot.wheel_base,
+                                            world.seed)
+                            if mocap is not None and world.odometry else None)
         self.truth = world.ideal
         self.watchdog = robot.watchdog_timeout
         self.staleness = world.staleness(TimeoutSettings().staleness)
@@ -293,11 +303,15 @@ class _WorldState:
             return pose, pose, self.view, np.array([1, 0, step], np.int64)
         self.k.deliver(t, self.hist, self.arrive, self.view, self.staleness, self.seen)
         own = self.est if self.world.odometry else pose
+        if self.pose_source is not None:
+            own = self.pose_source.step(step, t, self.est, pose)
         return own, self.seen, self.view, np.array([0, self.world.seed, step], np.int64)
 
     def after_control(self, step: int, t: float, own: np.ndarray, cmd: np.ndarray) -> None:
         """Dead agents command nothing new (their drivers hold the last command until
         their watchdog stops them); the live ones publish their state."""
+        if self.pose_source is not None:          # failsafe HOLD: no fix for too long
+            cmd[self.pose_source.held, :2] = 0.0
         if self.world.kill:
             alive, dead = self.alive, ~self.alive
             self.held[alive] = cmd[alive, :2]

@@ -36,6 +36,7 @@ class RunMetrics:
     worst_clearance: tuple[int, int] | None = None   # robot id, obstacle index
     killed: list = field(default_factory=list)       # robot ids whose agent died
     max_pose_error: float = 0.0                      # m, believed position vs truth
+    pose_holds: list = field(default_factory=list)   # robot ids held: no pose fix
     max_abs_v: float = 0.0
     max_abs_u: float = 0.0
     mode_switches: int = 0
@@ -194,6 +195,7 @@ class RunMetrics:
             "killed_robots": list(self.killed),
             "mode_switches": self.mode_switches,
             "max_pose_error": self.max_pose_error,
+            "pose_failsafe_robots": list(self.pose_holds),
             **self._governor_summary(),
         }
 

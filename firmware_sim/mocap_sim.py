@@ -39,7 +39,7 @@ class Outage:
 
 @dataclass(frozen=True)
 class MocapParams:
-    """A simulated motion-capture system (SITL only)."""
+    """A simulated motion-capture system (the SITL plant; the batch: firmware_sim.batch_pose)."""
 
     rate: float = setting(100.0, unit="Hz", lo=1.0, hi=1000.0, doc="fixes of each robot "
                           "per second")

@@ -184,7 +184,9 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         if m > cap or k > cap:
             continue
         # the governor's hazards: neighbours at their reported positions, grown by their
-        # data's age, and the detected obstacles
+        # data's age, and the detected obstacles; all grown by the robot's own position
+        # uncertainty (own[:, 3], with a pose source)
+        grow = own[i, 3] if own.shape[1] > 3 else 0.0
         n_h = 0
         for q in range(m):
             j = nbr_j[q]
@@ -195,12 +197,14 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                                                   0.5 * view[j, 4] * p.wheel_base, age, a,
                                                   p.accel, top_speed, staleness, share_age,
                                                   stop_time)
+            h_r[n_h] += grow
+            h_h[n_h] += grow
             h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness
             n_h += 1
         if not truth:
             k = detect(i, step, seed, det_noise, det_dropout, k, o_x, o_y, o_r, o_k)
         for q in range(k):
-            h_x[n_h], h_y[n_h], h_r[n_h], h_m[n_h] = o_x[q], o_y[q], o_r[q] + a, 0.0
+            h_x[n_h], h_y[n_h], h_r[n_h], h_m[n_h] = o_x[q], o_y[q], o_r[q] + a + grow, 0.0
             h_h[n_h] = -math.inf
             n_h += 1
         if not truth:
@@ -284,7 +288,8 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
             out_near: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray) -> tuple[int, int]:
     """Sense and run the law for every robot.
 
-    pose (N, 3) [m, m, rad] the truth; own (N, 3) the pose each robot believes it has;
+    pose (N, 3) [m, m, rad] the truth; own (N, 3) the pose each robot believes it has
+    (N, 4 with a pose source: and its position uncertainty [m], which grows every hazard);
     seen (N, 3) where the robots believe the others are: x, y [m] and NONE, FRESH or STALE
     (:mod:`firmware_sim.world_step`); view (N, 6) the states they last received from each
     other (x, y, theta, v, u, stamp [s]), for the governor's hazards; world_i = (1 when own

@@ -25,8 +25,8 @@ SWEPT_PREFIXES = ("family_", "world_", "control_")
 
 def scenario_doc(desc: Mapping[str, Any]) -> dict[str, Any]:
     """The complete scenario of a run: the family's (or micro case's) doc with the run's
-    [control], [robot] (and the wheels plant) and [world] (its kill drawn from the world
-    seed)."""
+    [control], [robot] (and the wheels plant), [world] (its kill drawn from the world
+    seed) and [mocap]."""
     control = from_table(ControlParams, desc["control"], "[control]")
     families = families_module()
     kwargs: dict[str, Any] = {"control": control}
@@ -53,6 +53,8 @@ def scenario_doc(desc: Mapping[str, Any]) -> dict[str, Any]:
             at = float(rng.uniform(kill_at[0], kill_at[1]))
             world["kill"] = [{"robot": robot, "at": round(at, 3)}]
         doc["world"] = world
+    if desc.get("mocap"):
+        doc["mocap"] = dict(desc["mocap"])
     return doc
 
 
@@ -102,7 +104,7 @@ def _simulate(desc: Mapping[str, Any], key: str) -> dict[str, Any]:
     options = SimOptions(duration=sc.duration, sensing_range=sc.sensing_range,
                          substeps=sc.substeps, plant=plant, record_every=0)
     result = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
-                      options, world=sc.world)
+                      options, world=sc.world, mocap=sc.mocap)
     metrics = result.metrics.summary(sc.name, options.duration)
     kill = (doc.get("world") or {}).get("kill") or [{}]
     out: dict[str, Any] = {

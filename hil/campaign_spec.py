@@ -13,6 +13,8 @@ Format (every key, with its unit and default, in docs/campaigns.md)::
     [[family]]
     micro = ["head_on_swap"]        # micro cases instead of family keys
     [world]                         # link_delay, ... : each a value or a list (crossed)
+    [mocap]                         # a pose source (MocapParams, no outages) for the runs
+                                    # whose world has wheel slip or encoder noise
     kill_share = 0.333              # share of runs with one robot killed at a time drawn
     kill_at = [5.0, 20.0]           # uniformly in this range [s]
     [control]                       # ControlParams fields: each a value or a list (crossed)
@@ -43,7 +45,7 @@ from hil import toml_text
 from hil.scenario import ScenarioError
 
 TOP_KEYS = {"name", "description", "duration", "seeds", "profiles", "family", "world",
-            "control"}
+            "mocap", "control"}
 FAMILY_TEXT = ("kind", "slots", "field")          # family keys holding strings
 FAMILY_KEYS = ("kind", "robots", "spacing", "slots", "field", "speed")
 WORLD_KEYS = ("link_delay", "link_jitter", "link_loss", "loss_burst", "wheel_slip",
@@ -124,6 +126,7 @@ def parse_spec(doc: dict[str, Any], where: str, base: Path, source: Path | None 
     world_combos, kill_share, kill_at = _world(rd, rd.table(doc, "world"))
     _check_worlds(world_combos, kill_share, kill_at, where)
     control_combos = _control(rd, rd.table(doc, "control"), where)
+    mocap = _mocap(rd, rd.table(doc, "mocap"))
 
     runs: dict[str, Run] = {}
     checked = 0
@@ -143,6 +146,9 @@ def parse_spec(doc: dict[str, Any], where: str, base: Path, source: Path | None 
                                             "control": control}
                     if world or killed:
                         desc["world"] = {**world, "seed": world_seed}
+                    if mocap and (world.get("wheel_slip", 0) > 0
+                                  or world.get("encoder_noise", 0) > 0):
+                        desc["mocap"] = mocap
                     if killed:
                         desc["kill_at"] = list(kill_at)
                     key = run_key(desc)
@@ -300,6 +306,20 @@ def _world(rd: TableReader, table: Mapping[str, Any]
     elif "kill_at" in table:
         rd.vector(table, "kill_at", "[world] kill_at", 2)
     return combos, share, kill_at
+
+
+def _mocap(rd: TableReader, table: Mapping[str, Any]) -> dict[str, Any]:
+    """The pose source of the runs with wrong odometry, checked as a scenario's [mocap]
+    (without outages: they name robots)."""
+    from firmware_sim.mocap_sim import MocapParams
+    if "outage" in table:
+        raise rd.fail("[mocap] outage", "outages name robots, which a campaign's families "
+                                        "generate; give them in a scenario instead")
+    try:
+        from_table(MocapParams, table, "[mocap]")
+    except ConfigError as exc:
+        raise rd.fail("[mocap]", str(exc)) from None
+    return dict(table)
 
 
 def _check_worlds(combos: list[dict[str, float]], kill_share: float,

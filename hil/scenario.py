@@ -11,7 +11,7 @@ Format (every field, with its unit and default, in docs/formats.md)::
     [[robots]]                      # id, pose = [x, y, theta], in formation order
     [[obstacles]]                   # center = [x, y], radius
     [world]                         # firmware_sim.world.WorldParams, optional (ideal)
-    [mocap]                         # firmware_sim.mocap_sim.MocapParams, optional: SITL
+    [mocap]                         # firmware_sim.mocap_sim.MocapParams, optional
                                     # pose fixes (absent: the agents have odometry alone)
 
 Every problem is reported as :class:`ScenarioError` naming the file and the field.
@@ -52,7 +52,7 @@ class Scenario:
     world: WorldParams = WorldParams()
     source: Path | None = None
     robot_given: bool = False   # the file has a [robot] table (else RobotParams' defaults)
-    mocap: MocapParams | None = None   # SITL: a simulated motion-capture system
+    mocap: MocapParams | None = None   # a simulated motion-capture system
 
 
 TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles",

@@ -53,16 +53,17 @@ def run(args: argparse.Namespace, console: Console) -> int:
                          sensing_range=sc.sensing_range,
                          substeps=args.substeps or sc.substeps, plant=plant,
                          record_every=args.record_every)
-    if sc.mocap is not None:
-        console.print("[yellow]note: the scenario's \\[mocap] (simulated motion capture) "
-                      "is for sitl; sim does not model it[/yellow]")
+    if sc.mocap is not None and not sc.world.odometry:
+        console.print("[yellow]note: the scenario's \\[mocap] changes nothing here: without "
+                      "wheel slip or encoder noise in \\[world] every robot knows its pose"
+                      "[/yellow]")
     if options.plant is PlantKind.WHEELS:
         console.print(speed_envelope(sc.control, sc.robot, sc.sensing_range,
                                      sc.world.link_delay + sc.control.period).describe())
     started = time.perf_counter()
     with LazyProgress(console, f"sim {sc.name}") as progress:
         result = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
-                          options, world=sc.world, progress=progress)
+                          options, world=sc.world, mocap=sc.mocap, progress=progress)
     elapsed = time.perf_counter() - started
     metrics = result.metrics.summary(sc.name, options.duration)
     metrics["plant"] = options.plant.value

@@ -168,7 +168,27 @@ def test_world_seed_and_kill_depend_on_the_seed_and_family_only(tmp_path, famili
     assert doc["control"]["hysteresis"] == run.description["control"]["hysteresis"]
 
 
+def test_mocap_goes_to_the_runs_whose_odometry_is_wrong(tmp_path, families):
+    """A spec's [mocap] is the pose source of the runs with wheel slip (their scenario
+    gets it); the other runs keep their description, hence their keys and cached rows."""
+    from hil.campaign_run import scenario_doc
+    from hil.campaign_spec import load_spec
+    text = CROSSED.replace("loss_burst = 2", "loss_burst = 2\nwheel_slip = [0.0, 0.05]")
+    plain = load_spec(write_spec(tmp_path / "a", text))
+    spec = load_spec(write_spec(tmp_path / "b", text + "[mocap]\nrate = 50.0\n"))
+    slipping = [r for r in spec.runs if r.description["world"].get("wheel_slip")]
+    assert len(slipping) == len(spec.runs) // 2
+    assert all(r.description["mocap"] == {"rate": 50.0} for r in slipping)
+    assert all("mocap" not in r.description for r in spec.runs if r not in slipping)
+    assert scenario_doc(slipping[0].description)["mocap"] == {"rate": 50.0}
+    keys = {r.key for r in spec.runs}
+    assert {r.key for r in plain.runs} & keys == keys - {r.key for r in slipping}
+
+
 @pytest.mark.parametrize("change, field", [
+    (("[control]", "[mocap]\nrate = 0.5\n[control]"), "[mocap]"),
+    (("[control]", "[mocap]\n[[mocap.outage]]\nrobot = 1\nat = 1.0\nduration = 1.0\n"
+                   "[control]"), "[mocap] outage"),
     (("name = \"crossed\"", "name = \"crossed\"\nrepeat = 2"), "top level: unknown field"),
     (("robots = [5, 8]", "robots = [5, 8]\nsize = 3"), "family[0]: unknown field"),
     (("kind = [\"line\", \"grid\"]", "kind = [\"line\", \"hexagon\"]"), "family[0]"),
