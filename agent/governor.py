@@ -75,6 +75,21 @@ def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: flo
     return full, a + grow
 
 
+def silent_radius(speed: float, turn: float, age: float, a: float, accel: float,
+                  top_speed: float, staleness: float, share_age: float, stop_time: float
+                  ) -> float:
+    """The radius [m] of the obstacle the law goes round for a silent neighbour (arguments
+    as :func:`neighbour_hazard`): its silent disc less a, since the law keeps b > a from an
+    obstacle's surface, at least a/2. On a robot that brakes at once (infinite ``accel``)
+    a/2 alone: there the disc is what it could drive at top speed until the staleness
+    limit, metres for a neighbour silent for a moment, and such discs scatter a formation."""
+    if math.isinf(accel):
+        return 0.5 * a
+    full, _ = neighbour_hazard(speed, turn, age, a, accel, top_speed, staleness, share_age,
+                               stop_time)
+    return max(0.5 * a, full - a)
+
+
 def stopping(speed: float, accel: float, delay: float, turn: float = 0.0) -> float:
     """The longest path [m] of the centre of a robot moving at ``speed`` [m/s] with its
     wheels ``turn`` [m/s] apart (their ground speeds speed +- turn) that holds its command

@@ -48,6 +48,7 @@ class InRange:
     fresh_id: list[int] = field(default_factory=list)   # their robot ids
     stale_x: list[float] = field(default_factory=list)  # at their last position
     stale_y: list[float] = field(default_factory=list)
+    stale: list[int] = field(default_factory=list)   # index of each stale one in the input
     ages: list[float] = field(default_factory=list)  # s, now - stamp of each fresh one
     fresh: list[int] = field(default_factory=list)   # index of each fresh one in the input
 
@@ -81,6 +82,7 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
             if stale:
                 out.stale_x.append(px)
                 out.stale_y.append(py)
+                out.stale.append(i)
             else:
                 out.fresh_x.append(px)
                 out.fresh_y.append(py)

@@ -28,7 +28,7 @@ import numpy as np
 
 from agent.config import CONTROL_PARAMS
 from agent.formation import Formation
-from agent.governor import neighbour_hazard
+from agent.governor import neighbour_hazard, silent_radius
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step, pair_active
 from agent.loop import Clock
@@ -457,8 +457,8 @@ class Agent:
                       obs: ObstaclesMsg | None, now_w: float
                       ) -> tuple[InRange, list[float], list[float], list[float]]:
         """Neighbours in range [m] (extrapolated to now) and obstacles' centres and radii
-        [m] (the detections ``obs``), stale robots included as static obstacles of radius
-        a/2 at their last position."""
+        [m] (the detections ``obs``), stale robots included as static obstacles at their
+        last position (agent.governor.silent_radius)."""
         me = self.s.robot_id
         recs = [r for rid, r in neighbours.items() if rid != me]
         near = in_range([r.msg for r in recs], pose[0], pose[1], now_w,
@@ -469,7 +469,10 @@ class Agent:
                                 obs.radii.tolist()) if obs is not None else ([], [], []))
         obs_x += near.stale_x
         obs_y += near.stale_y
-        obs_r += [self.s.control.a / 2] * len(near.stale_x)
+        half_base, disc = self._disc_args()
+        for i in near.stale:
+            m = recs[i].msg
+            obs_r.append(silent_radius(m.v, half_base * m.u, now_w - m.stamp, *disc))
         return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:

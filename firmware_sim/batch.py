@@ -270,8 +270,7 @@ class _WorldState:
         stop_time = self.watchdog + (0.0 if ideal else robot.drive_latency)
         top_speed = control.v_max if ideal else min(control.v_max, robot.v_wheel_max)
         self.world_f = np.array([world.detection_noise, world.detection_dropout,
-                                 control.a / 2.0, self.staleness, control.share_age,
-                                 stop_time, top_speed])
+                                 self.staleness, control.share_age, stop_time, top_speed])
         self.alive = np.ones(n, bool)
         index = {int(r): i for i, r in enumerate(ids)}
         self.kill_at = np.full(n, np.inf)

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from agent.formation import reference_point
-from agent.governor import neighbour_hazard
+from agent.governor import neighbour_hazard, silent_radius
 from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step, pair_active
 from firmware_sim.world_step import FRESH, NONE, STALE, detect
@@ -163,8 +163,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     """:func:`control` for robots lo..hi - 1: returns (capacity, watch capacity) needed."""
     out_cmd, out_ref, out_mem_f, out_mem_i, out_held, out_near, watch_j, watch_k = outs
     truth, seed, step = world_i[0] != 0, world_i[1], world_i[2]
-    det_noise, det_dropout, stale_radius = world_f[0], world_f[1], world_f[2]
-    staleness, share_age, stop_time, top_speed = world_f[3], world_f[4], world_f[5], world_f[6]
+    det_noise, det_dropout = world_f[0], world_f[1]
+    staleness, share_age, stop_time, top_speed = world_f[2], world_f[3], world_f[4], world_f[5]
     need, need_watch = 0, 0
     max_r = obs[:, 2].max() if len(obs) else 0.0
     nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
@@ -214,7 +214,11 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 status = seen[nbr_j[q], 2]
                 if status == STALE:
                     if k < cap:
-                        o_x[k], o_y[k], o_r[k], o_k[k] = nbr_x[q], nbr_y[q], stale_radius, -1
+                        j = nbr_j[q]
+                        o_x[k], o_y[k], o_k[k] = nbr_x[q], nbr_y[q], -1
+                        o_r[k] = silent_radius(view[j, 3], 0.5 * view[j, 4] * p.wheel_base,
+                                               t - view[j, 5], a, p.accel, top_speed,
+                                               staleness, share_age, stop_time)
                     k += 1
                 elif status == FRESH:
                     nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]
@@ -294,10 +298,11 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
     (:mod:`firmware_sim.world_step`); view (N, 6) the states they last received from each
     other (x, y, theta, v, u, stamp [s]), for the governor's hazards; world_i = (1 when own
     and seen are the truth and detections exact, seed, period number), world_f =
-    (detection noise [m], detection dropout, radius [m] of a stale neighbour as an
-    obstacle, staleness [s], sharing age [s], stop time of a dead agent [s], top speed
-    [m/s]) (:func:`agent.governor.neighbour_hazard`). Memory of :class:`LawMemory` as
-    floats (N, 7): prev_ex, prev_ey, center_x, center_y, radius, wheel_r, wheel_l, and
+    (detection noise [m], detection dropout, staleness [s], sharing age [s], stop time
+    of a dead agent [s], top speed [m/s]) (:func:`agent.governor.neighbour_hazard`; a
+    stale neighbour is an obstacle of :func:`agent.governor.silent_radius`). Memory of
+    :class:`LawMemory` as floats (N, 7): prev_ex, prev_ey, center_x, center_y, radius,
+    wheel_r, wheel_l, and
     ints (N, 3): has_prev, avoiding, side; held (N, cap + 1) the indices of the robots
     each robot's pairs with which were active (:func:`agent.law.pair_active`), -1 ending
     the list; offsets (N, 2) [m] and motion (5,) = centre0 x,

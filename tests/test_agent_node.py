@@ -131,7 +131,7 @@ def test_driver_error_triggers_failsafe_with_its_name():
 def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     """On a cart (3 m/s, 2 m/s^2): the governor keeps it out of the silent robot's disc
     (where that could have driven before it must have stopped: 1.9 m), and the law goes
-    round it as an obstacle (b beyond its a/2 radius)."""
+    round it as an obstacle of that disc less a (agent.governor.silent_radius)."""
     cart = RobotParams(wheel_radius=0.0825, wheel_base=0.8, wheel_speed_limit=5.79,
                        wheel_ramp=3.86, drive_latency=0.02)
     clock, net, agents = make_swarm([(0.0, 0.0, 0.0), (4.0, 0.0, 0.0)],
@@ -146,7 +146,8 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     disc = neighbour_hazard(0.0, 0.0, 1.0, 1.0, cart.a_max, cart.v_wheel_max, 0.5, 0.1,
                             0.1 + cart.drive_latency)[0]
     assert disc == pytest.approx(1.87, abs=0.01)
-    assert near.fresh_x == [] and (obs_x, obs_y, obs_r) == ([4.0], [0.0], [0.5])
+    assert near.fresh_x == [] and (obs_x, obs_y) == ([4.0], [0.0])
+    assert obs_r == [pytest.approx(disc - 1.0)]
     dmin = np.inf
     for _ in range(400):
         a.tick()

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.governor import braking_speed, neighbour_hazard, speed_limits, stopping
+from agent.governor import braking_speed, neighbour_hazard, silent_radius, speed_limits, stopping
 from agent.kinematics import arc_step
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
@@ -52,6 +52,19 @@ def test_a_silent_neighbour_is_a_static_disc_grown_until_it_must_have_stopped():
     assert full == pytest.approx(A + 2.0 * STALE + 0.5 * ACCEL * STALE ** 2 + now * STOP
                                  + (now ** 2 + apart ** 2) / (2 * ACCEL))
     assert neighbour_hazard(2.0, 0.0, 50.0, A, ACCEL, TOP, STALE, SHARE, STOP)[0] == full
+
+
+def test_the_law_goes_round_a_silent_neighbour_as_its_disc_less_a():
+    """The law keeps b > a from an obstacle's surface: a silent neighbour's obstacle is its
+    disc less a, so the law's path stays outside the governor's disc and the robot does not
+    wait at its edge; at least a/2, and a/2 on a robot that brakes at once (there the disc
+    is metres for a neighbour silent a moment)."""
+    disc = (1.0, 2.0, 3.0, 0.5, 0.1, 0.12)         # a, accel, top speed, staleness, ...
+    full, _ = neighbour_hazard(1.5, 0.2, 0.8, *disc)
+    assert silent_radius(1.5, 0.2, 0.8, *disc) == pytest.approx(full - 1.0)
+    assert full - 1.0 > 2.0
+    assert silent_radius(1.5, 0.2, 0.8, 1.0, math.inf, 3.0, 0.5, 0.1, 0.12) == 0.5
+    assert silent_radius(0.0, 0.0, 0.8, 4.0, 50.0, 0.1, 0.5, 0.1, 0.0) == 2.0   # a/2 floor
 
 
 def dead_robot_path(v, u, base, accel, hold, dt=1e-4):
