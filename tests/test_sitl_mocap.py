@@ -132,11 +132,20 @@ def test_the_launcher_gives_the_agents_a_pose_table_only_with_mocap(tmp_path):
                           14550).pose is None
 
 
-def test_sim_says_it_does_not_model_the_mocap_table(tmp_path, capsys):
+def test_sim_fuses_the_mocap_table_and_says_when_it_changes_nothing(tmp_path, capsys):
+    """sim takes the same table: on slipping wheels the fixes keep the pose error small
+    and robot 2's outage holds it; without slip it says the table changes nothing."""
+    import json
+
     from hil.cli import main
-    path, _ = _scenario(tmp_path, duration=0.5)
-    assert main(["sim", str(path), "--out", str(tmp_path / "run")]) == 0
-    assert "[mocap] (simulated motion capture) is for sitl" in capsys.readouterr().out
+    path, _ = _scenario(tmp_path, duration=6.0)
+    assert main(["sim", str(path), "--out", str(tmp_path / "run"), "--record-every", "0"]) == 0
+    fused = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert fused["max_pose_error"] < 0.1 and fused["pose_failsafe_robots"] == [2]
+    path.write_text(path.read_text().replace("wheel_slip = 0.03", "wheel_slip = 0.0"))
+    capsys.readouterr()
+    assert main(["sim", str(path), "--out", str(tmp_path / "run2"), "--record-every", "0"]) == 0
+    assert "[mocap] changes nothing here" in capsys.readouterr().out
 
 
 @pytest.mark.flaky(reruns=1)      # wall clock: a stall of a shared machine can trip a timeout
