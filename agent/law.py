@@ -120,6 +120,15 @@ class LawMemory(NamedTuple):
     wheel_l: float = 0.0        # rev/s, the left wheel's
 
 
+def moved_estimate(mem: LawMemory, dx: float, dy: float) -> LawMemory:
+    """The memory after the robot's pose estimate moved by (dx, dy) [m] while the robot did
+    not (a pose fix corrected it): the remembered error moves with it, so that the error's
+    finite difference, and the heading-rate feed-forward taken from it, see motion only.
+    Otherwise every fix's correction, divided by one period, becomes a heading rate: with
+    2 mm of fix noise, tenths of a rad/s."""
+    return mem._replace(prev_ex=mem.prev_ex + dx, prev_ey=mem.prev_ey + dy)
+
+
 def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_vx: float,
              ref_vy: float, nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_held: FloatSeq,
              obs_x: FloatSeq, obs_y: FloatSeq,

@@ -30,7 +30,7 @@ from agent.config import CONTROL_PARAMS
 from agent.formation import Formation
 from agent.governor import neighbour_hazard, silent_radius
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
-from agent.law import LawMemory, LawParams, law_step, pair_active
+from agent.law import LawMemory, LawParams, law_step, moved_estimate, pair_active
 from agent.loop import Clock
 from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry, Pose
@@ -304,9 +304,11 @@ class Agent:
         if self.fusion is None or self.fixes is None:
             self.pose = self.odometry.pose
             return self.pose
-        self.fusion.update(now_w, self.odometry.pose)
-        if (fix := self.fixes.fix()) is not None:
-            self.fusion.fix(fix)
+        before = self.fusion.update(now_w, self.odometry.pose)
+        if (fix := self.fixes.fix()) is not None and self.fusion.fix(fix):
+            after = self.fusion.pose
+            self.memory = moved_estimate(self.memory, after[0] - before[0],
+                                         after[1] - before[1])
         self.pose = self.fusion.pose
         return self.pose
 

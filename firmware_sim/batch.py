@@ -176,6 +176,8 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         t = step * T
         t0 = clock() if clock else 0.0
         own, seen, view, world_i = w.before_control(step, t, pose, cmd)
+        if w.pose_source is not None:       # agent.law.moved_estimate, for every robot
+            mem_f[:, :2] += w.pose_source.jump
         if own is not pose:
             metrics.max_pose_error = max(metrics.max_pose_error, float(
                 np.hypot(own[:, 0] - pose[:, 0], own[:, 1] - pose[:, 1]).max(initial=0.0)))

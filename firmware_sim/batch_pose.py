@@ -25,7 +25,9 @@ from firmware_sim.mocap_sim import MocapParams
 
 class BatchPoseSource:
     """Pose estimates (N, 4): x, y, theta [m, m, rad] and the position uncertainty [m] that
-    grows the governor's hazards, for robots ``ids`` starting at ``pose0`` (N, 3)."""
+    grows the governor's hazards, for robots ``ids`` starting at ``pose0`` (N, 3); ``jump``
+    (N, 2) [m]: how far the last step's fixes moved each estimate (for
+    :func:`agent.law.moved_estimate`)."""
 
     def __init__(self, params: MocapParams, ids: np.ndarray, pose0: np.ndarray,
                  period: float, wheel_base: float, world_seed: int):
@@ -40,6 +42,7 @@ class BatchPoseSource:
         self._seq = 0
         self.held = np.zeros(len(self.ids), bool)   # robots in a failsafe HOLD
         self.out = np.zeros((len(self.ids), 4))
+        self.jump = np.zeros((len(self.ids), 2))   # m, what this period's fixes moved each
         for i, f in enumerate(self.fusion):       # at rest, with a fix of where they stand
             f.update(0.0, (float(pose0[i, 0]), float(pose0[i, 1]), float(pose0[i, 2])))
             f.fix(FixMsg(self.ids[i], 0, 0.0, float(pose0[i, 0]), float(pose0[i, 1]),
@@ -64,13 +67,15 @@ class BatchPoseSource:
                              float(truth[i, 1] + p.noise * noise[i, 1]),
                              float(truth[i, 2] + p.heading_noise * noise[i, 2]), p.error)
                 self._queue.append((t + p.latency, i, fix))
+        out = self.out
         for i, f in enumerate(self.fusion):
-            f.update(t, (float(odometry[i, 0]), float(odometry[i, 1]), float(odometry[i, 2])))
+            out[i, :3] = f.update(t, (float(odometry[i, 0]), float(odometry[i, 1]),
+                                      float(odometry[i, 2])))
         while self._queue and self._queue[0][0] <= t + 1e-9:
             _, i, fix = self._queue.popleft()
             self.fusion[i].fix(fix)
-        out = self.out
         for i, f in enumerate(self.fusion):
+            self.jump[i, 0], self.jump[i, 1] = f.pose[0] - out[i, 0], f.pose[1] - out[i, 1]
             out[i, 0], out[i, 1], out[i, 2] = f.pose
             out[i, 3] = f.uncertainty
             if f.age(t) > p.fix_timeout:
