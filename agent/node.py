@@ -471,10 +471,11 @@ class Agent:
                                 obs.radii.tolist()) if obs is not None else ([], [], []))
         obs_x += near.stale_x
         obs_y += near.stale_y
-        half_base, disc = self._disc_args()
-        for i in near.stale:
-            m = recs[i].msg
-            obs_r.append(silent_radius(m.v, half_base * m.u, now_w - m.stamp, *disc))
+        if near.stale:                  # (rare: the disc arguments only then)
+            half_base, disc = self._disc_args()
+            for i in near.stale:
+                m = recs[i].msg
+                obs_r.append(silent_radius(m.v, half_base * m.u, now_w - m.stamp, *disc))
         return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:

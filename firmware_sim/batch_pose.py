@@ -31,7 +31,7 @@ class BatchPoseSource:
 
     def __init__(self, params: MocapParams, ids: np.ndarray, pose0: np.ndarray,
                  period: float, wheel_base: float, world_seed: int):
-        self.p, self.ids, self.period = params, [int(r) for r in ids], period
+        self.p, self.ids = params, [int(r) for r in ids]
         self.every = max(1, math.ceil(1.0 / (params.rate * period) - 1e-9))
         self._rng = np.random.default_rng([params.seed, world_seed, 3])
         settings = PoseSettings(fix_timeout=params.fix_timeout,
@@ -48,10 +48,6 @@ class BatchPoseSource:
             f.fix(FixMsg(self.ids[i], 0, 0.0, float(pose0[i, 0]), float(pose0[i, 1]),
                          float(pose0[i, 2]), params.error))
 
-    def _lost(self, i: int, t: float) -> bool:
-        return any(o.robot == self.ids[i] and o.at <= t < o.at + o.duration
-                   for o in self.p.outage)
-
     def step(self, step: int, t: float, odometry: np.ndarray, truth: np.ndarray) -> np.ndarray:
         """The estimates at period ``step`` (time ``t`` [s]) from the robots' ``odometry``
         (N, 3) and, for the capture, their ``truth`` (N, 3)."""
@@ -61,12 +57,9 @@ class BatchPoseSource:
             noise = self._rng.normal(size=(len(self.ids), 3))
             lost = self._rng.random(len(self.ids)) < p.dropout
             for i in range(len(self.ids)):
-                if lost[i] or self._lost(i, t):
-                    continue
-                fix = FixMsg(self.ids[i], self._seq, t, float(truth[i, 0] + p.noise * noise[i, 0]),
-                             float(truth[i, 1] + p.noise * noise[i, 1]),
-                             float(truth[i, 2] + p.heading_noise * noise[i, 2]), p.error)
-                self._queue.append((t + p.latency, i, fix))
+                if not (lost[i] or p.out(self.ids[i], t)):
+                    fix = p.fix(self.ids[i], self._seq, t, truth[i], noise[i])
+                    self._queue.append((t + p.latency, i, fix))
         out = self.out
         for i, f in enumerate(self.fusion):
             out[i, :3] = f.update(t, (float(odometry[i, 0]), float(odometry[i, 1]),

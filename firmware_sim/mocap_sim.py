@@ -67,6 +67,19 @@ class MocapParams:
         """The position error bound [m] each fix states: three standard deviations."""
         return max(3.0 * self.noise, MIN_ERROR)
 
+    def out(self, robot_id: int, t: float) -> bool:
+        """Whether ``robot_id``'s fixes are stopped at mission time ``t`` [s]."""
+        return any(o.robot == robot_id and o.at <= t < o.at + o.duration
+                   for o in self.outage)
+
+    def fix(self, robot_id: int, seq: int, stamp: float, pose: Sequence[float],
+            z: Sequence[float]) -> FixMsg:
+        """The fix of a robot at true ``pose`` (x, y, theta), captured at ``stamp`` [s], off
+        by ``z`` (three standard normal draws) times the noise."""
+        return FixMsg(robot_id, seq, stamp, float(pose[0] + self.noise * z[0]),
+                      float(pose[1] + self.noise * z[1]),
+                      float(pose[2] + self.heading_noise * z[2]), self.error)
+
 
 class Tracked(Protocol):
     """What the system sees of a robot (firmware_sim.sitl_plant.PlantRobot)."""
@@ -95,9 +108,7 @@ class SimulatedMocap:
             self._epoch = self.epoch()
             if self._epoch is None:
                 return False
-        t = now - self._epoch
-        return any(o.robot == robot_id and o.at <= t < o.at + o.duration
-                   for o in self.p.outage)
+        return self.p.out(robot_id, now - self._epoch)
 
     def step(self, now: float, robots: Sequence[Tracked]) -> None:
         """Capture ``robots`` if a capture is due at ``now`` (UNIX [s]); publish the fixes
@@ -112,10 +123,7 @@ class SimulatedMocap:
                 if lost[k] or self._out(rb.robot_id, now):
                     self.lost += 1
                     continue
-                x, y, theta = rb.pose
-                msg = FixMsg(rb.robot_id, self._seq, now, x + p.noise * noise[k, 0],
-                             y + p.noise * noise[k, 1], theta + p.heading_noise * noise[k, 2],
-                             p.error)
+                msg = p.fix(rb.robot_id, self._seq, now, rb.pose, noise[k])
                 self._queue.append((now + p.latency, rb.robot_id, msg.encode()))
         while self._queue and self._queue[0][0] <= now:
             _, rid, payload = self._queue.popleft()
