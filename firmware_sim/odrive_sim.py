@@ -14,8 +14,11 @@
   IDLE; here it expires only in closed loop, where it stops a wheel); Estop ->
   ESTOP_REQUESTED and IDLE; in IDLE the wheel coasts down (first order, ``coast_tau``);
   Clear_Errors clears the errors;
-* the encoder position integrates the actual wheel speed (its mean over each step); bus
-  voltage and a current that grows with acceleration and speed.
+* the encoder position counts the wheel's actual turns: the speed reached at each step's
+  end, held over the step, the very turns the plant moves the robot by (a step-mean rule
+  would differ from them by half of each step's speed change times that step's length, a
+  sum that random step lengths turn into a heading drift); bus voltage and a current that
+  grows with acceleration and speed.
 
 :class:`DriverPair` serves the axes of one robot on its bus: commands in, Heartbeat (100 ms)
 and Get_Encoder_Estimates (10 ms) out, remote requests answered; frames read as firmware reads
@@ -138,7 +141,7 @@ class EmulatedAxis:
             if abs(vel) < 1e-4:
                 vel = 0.0
         self.vel = vel
-        self.pos += 0.5 * (before + vel) * dt
+        self.pos += vel * dt
         accel = (vel - before) / dt if dt > 0 else 0.0
         self.current = 0.05 * abs(accel) + 0.02 * abs(vel) + (0.1 if closed else 0.0)
 

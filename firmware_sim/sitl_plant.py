@@ -12,10 +12,9 @@ simulator's wheels plant (:func:`firmware_sim.swarm_step.advance`) holds its ram
 speeds: given the same wheel set-points both plants move a robot alike, to rounding.
 
 The truth never depends on what the robot measures or believes: the encoder positions,
-which the agent's odometry integrates, are not read. The drivers integrate their encoders
-with the speed's mean over each step, so a wheel's encoder and its turns in the truth differ
-by half a step's worth of the wheel's speed change since the start: an offset that does not
-grow with time.
+which the agent's odometry integrates, are not read. The drivers count the same turns the
+truth moves by (:mod:`firmware_sim.odrive_sim`), so in an ideal world the odometry errs only
+by sampling the wheels apart in time, never by a drift of the plant's making.
 
 The plant publishes on Zenoh what the real world would give the robot's sensors: obstacle
 detections within sensing range (10 Hz), pose fixes of a simulated motion-capture system

@@ -17,7 +17,7 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import can
@@ -202,18 +202,21 @@ def cmd_replay(args: argparse.Namespace, console: Console) -> int:
         bus.shutdown()
 
 
-def replay(bus: can.BusABC, frames: list[can.Message], speed: float = 1.0) -> int:
-    """Send ``frames`` keeping their relative timing (sleep, then spin the last ms)."""
+def replay(bus: can.BusABC, frames: list[can.Message], speed: float = 1.0,
+           clock: Callable[[], float] = time.perf_counter,
+           sleep: Callable[[float], None] = time.sleep) -> int:
+    """Send ``frames`` keeping their relative timing (sleep, then spin the last ms) on
+    ``clock`` [s]."""
     if not frames:
         return 0
     if speed <= 0:
         raise ValueError(f"replay speed must be > 0, got {speed}")
-    start, first = time.perf_counter(), frames[0].timestamp
+    start, first = clock(), frames[0].timestamp
     for msg in frames:
         target = start + (msg.timestamp - first) / speed
-        while (left := target - time.perf_counter()) > 0:
+        while (left := target - clock()) > 0:
             if left > 0.002:
-                time.sleep(left - 0.001)
+                sleep(left - 0.001)
         bus.send(can.Message(arbitration_id=msg.arbitration_id, data=msg.data,
                              is_extended_id=msg.is_extended_id,
                              is_remote_frame=msg.is_remote_frame, dlc=msg.dlc))

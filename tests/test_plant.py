@@ -102,8 +102,7 @@ class _NoBus:
 def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch_plant():
     """From rest, the emulated drivers ramp to their set-points: the robot moves as the batch
     simulator's wheels plant moves it for the same wheel set-points (the ramped speed at
-    each step's end, held over the step), while the drivers' encoders, integrating each
-    step's mean speed, lag behind the truth by half a step of the speed reached."""
+    each step's end, held over the step), and the drivers' encoders count those turns."""
     from agent.kinematics import TWO_PI, body_velocity
     from firmware_sim.odrive_sim import DriverPair
     from firmware_sim.sitl_plant import PlantRobot
@@ -138,8 +137,42 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
         assert rb.pose == pytest.approx(tuple(pose[0]), abs=1e-12)
     assert wheels[0] == pytest.approx([right, left])                  # the ramp is over
     encoders = drivers.wheel_state()[:2]
-    assert encoders == pytest.approx(tuple(turns[0] - 0.5 * dt * np.array([right, left])),
-                                     abs=1e-12)
+    assert encoders == pytest.approx(tuple(turns[0]), abs=1e-12)
+
+
+def test_odometry_of_the_emulated_encoders_follows_the_truth_over_uneven_steps():
+    """A fast-ramping robot whose set-points jump every period, on a plant stepped by uneven
+    real-time steps: odometry integrating the encoders every 20 ms ends where the truth is
+    (the encoders count the turns the truth moves by, so no heading drift builds up)."""
+    from agent.odometry import Odometry
+    from firmware_sim.odrive_sim import DriverPair
+    from firmware_sim.sitl_plant import PlantRobot
+    from transport.odrive_frames import AxisState
+
+    robot = RobotParams(wheel_ramp=1000.0, wheel_speed_limit=10.0)
+    drivers = DriverPair(_NoBus())
+    drivers.configure(ramp=robot.wheel_ramp, vel_limit=robot.wheel_speed_limit,
+                      enable_watchdog=False)
+    for node in (drivers.right_node, drivers.left_node):
+        drivers.axes[node].request_state(AxisState.CLOSED_LOOP_CONTROL)
+    rb = PlantRobot(1, (0.0, 0.0, 0.0), drivers)
+    plant = _plant([rb], robot)
+    odometry = Odometry(robot.wheel_radius, robot.wheel_base, rb.pose)
+    odometry.update(*drivers.wheel_state()[:2])
+    rng = np.random.default_rng(3)
+    t = 0.0
+    for k in range(500):                                    # 10 s of 20 ms periods
+        for node in (drivers.right_node, drivers.left_node):
+            drivers.axes[node].input_vel(float(rng.uniform(-10.0, 10.0)))
+        end = 0.02 * (k + 1)
+        while t < end - 1e-9:
+            dt = min(float(rng.uniform(0.002, 0.008)), end - t)
+            plant.step(dt, t, 100.0 + t)
+            t += dt
+        odometry.update(*drivers.wheel_state()[:2])
+    x, y, theta = rb.pose
+    assert odometry.pose[2] == pytest.approx(theta, abs=1e-9)
+    assert np.hypot(odometry.pose[0] - x, odometry.pose[1] - y) < 0.05
 
 
 def test_sitl_plant_truth_is_independent_of_the_encoders_and_of_odometry():
