@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 import traceback
 
@@ -44,12 +45,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def stop_on_signals() -> None:
+    """SIGINT and SIGTERM end a command as Ctrl-C does (KeyboardInterrupt: a launcher ends
+    its children first). Also when the command was started in the background of a script,
+    whose shell sets SIGINT to be ignored, and when a service manager sends SIGTERM: either
+    would otherwise leave a launcher's agents and plant running. Commands with a stop of
+    their own (router, recorder, mocap bridge, plant, agent) replace these handlers."""
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, interrupt)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = plant_cli.as_subcommand(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     where = f"boundswarm {args.command}"
+    stop_on_signals()
     try:
         code: int = args.func(args, Console())
         return code

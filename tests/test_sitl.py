@@ -26,12 +26,13 @@ SCENARIOS = ROOT / "scenarios"
 
 
 class Launcher:
-    def __init__(self, tmp_path: Path, scenario: str, *extra: str):
+    def __init__(self, tmp_path: Path, scenario: str, *extra: str, preexec_fn=None):
         self.out = tmp_path / "run"
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "hil.cli", "sitl", str(SCENARIOS / scenario), "--out",
              str(self.out), "--no-live", "--can-base-port", str(44000 + os.getpid() % 1000 * 10),
-             *extra], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+             *extra], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            preexec_fn=preexec_fn)
 
     def manifest(self) -> dict:
         try:
@@ -222,6 +223,27 @@ def test_sigkill_of_an_agent_and_malformed_payloads(launch):
     assert s["watchdog_trips"]["1"] == 0 and s["watchdog_trips"]["3"] == 0
     assert s["zenoh_dropped"]["3"].get("size", 0) >= 1   # counted, not used
     assert not [p for p in run.pids() if alive(p)]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_ends_the_launcher_and_every_process_it_started(tmp_path, signum):
+    """Started as a script's background job (SIGINT inherited as ignored), the launcher still
+    ends on SIGINT, and on SIGTERM, as on Ctrl-C: its agents, plant and router are gone."""
+    run = Launcher(tmp_path, "sitl_small.toml", "--duration", "300",
+                   preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        deadline = time.monotonic() + 60
+        while len(run.pids()) < 5 and time.monotonic() < deadline:   # 3 agents, plant, router
+            time.sleep(0.2)
+        pids = run.pids()
+        assert len(pids) == 5, run.manifest()
+        run.proc.send_signal(signum)
+        code, out = run.wait(timeout=30)
+        assert code == 130, out
+        assert "interrupted" in out
+        assert not [p for p in pids if alive(p)]
+    finally:
+        run.cleanup()
 
 
 def test_bad_agent_config_is_refused_naming_the_field(tmp_path):
