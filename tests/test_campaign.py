@@ -378,10 +378,16 @@ def test_smoke_on_separate_scheduler_and_workers_equals_the_local_run(tmp_path, 
                               env=families, stdout=subprocess.DEVNULL,
                               stderr=subprocess.DEVNULL)]
     try:
+        def written() -> str | None:          # the scheduler writes its file, not at once
+            try:
+                return json.loads(scheduler_file.read_text())["address"]
+            except (OSError, ValueError, KeyError):
+                return None
+
         deadline = time.monotonic() + 60
-        while not scheduler_file.exists() and time.monotonic() < deadline:
+        while (address := written()) is None and time.monotonic() < deadline:
             time.sleep(0.1)
-        address = json.loads(scheduler_file.read_text())["address"]
+        assert address, f"no scheduler address in {scheduler_file} after 60 s"
         for _ in range(2):
             procs.append(subprocess.Popen(
                 [py, "-m", "distributed.cli.dask_worker", "--scheduler-file",
