@@ -127,7 +127,8 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
                  haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq, haz_half: FloatSeq,
                  haz_moving: FloatSeq, accel: float, period: float, latency: float,
                  turn_rate: float, wheel_base: float,
-                 top_speed: float = math.inf) -> tuple[float, float]:
+                 top_speed: float = math.inf, margin: float = 0.0
+                 ) -> tuple[float, float, float]:
     """(forward, backward) speed limits [m/s] (inf: none) of a robot at (x, y, theta)
     [m, m, rad] moving at (v_now [m/s], u_now [rad/s]) among hazards (centre; exclusion
     radii [m]: of the whole free distance, and of the half this robot owns (-inf: no such
@@ -146,8 +147,13 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     wheel_base), whichever is less. A hazard counts with the cosine of its bearing's angle to the
     nearest heading of that sweep (1 inside it; none beyond 90 degrees); a moving one as if
     its bearing were MOVING_PAD nearer, as its own motion turns the line of sight. Hazards
-    farther than the robot needs to stop from ``top_speed`` [m/s] are skipped."""
-    fwd = bwd = math.inf
+    farther than the robot needs to stop from ``top_speed`` [m/s] are skipped.
+
+    The speeds keep ``margin`` [m] more to every hazard, room for the robot's drift along its
+    heading while it turns with slipping wheels (:func:`turn_limit`); the third value is that
+    room: the least free distance [m] ahead or behind, margin included, over the cosine of
+    the hazard's angle (inf: none near)."""
+    fwd = bwd = room = math.inf
     reaction = period + latency
     ramp = 0.0 if math.isinf(accel) else accel * period   # m/s the speed may differ by in flight
     turn = 0.5 * abs(u_now) * wheel_base                 # m/s, the wheels' half difference
@@ -163,7 +169,7 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
         dx, dy = haz_x[h] - x, haz_y[h] - y
         d = math.sqrt(dx * dx + dy * dy)
         free = min(d - haz_r[h], 0.5 * (d - haz_half[h]))
-        if free >= reach:            # cannot hold the robot below its top speed
+        if free >= reach + margin:   # cannot hold the robot below its top speed
             continue
         bearing = math.atan2(dy, dx)
         for backward in range(2):
@@ -173,13 +179,37 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
                 off -= MOVING_PAD
             c = 1.0 if d < EPS or off <= 0.0 else math.cos(off)
             if c > EPS:
+                room = min(room, free / c)
                 going = max(-v_now if backward else v_now, 0.0)      # m/s this way now
-                limit = braking_speed(free / c - (going + ramp) * latency, accel, period,
-                                      turn)
+                limit = braking_speed((free - margin) / c - (going + ramp) * latency, accel,
+                                      period, turn)
                 if going > limit:        # behind the braking curve: brake at the full ramp
                     limit = 0.0
                 if backward:
                     bwd = min(bwd, limit)
                 else:
                     fwd = min(fwd, limit)
-    return fwd, bwd
+    return fwd, bwd, room
+
+
+def slip_margin(slip: float, wheel_base: float) -> float:
+    """The drift [m] along its heading of a robot turning half a turn on the spot whose
+    wheels slip by up to ``slip`` (a fraction of each wheel's turn that does not move the
+    ground): its wheels roll pi wheel_base / 2 each way, and unequal slip leaves the centre
+    moving by up to slip times that."""
+    return slip * 0.5 * math.pi * wheel_base
+
+
+def turn_limit(room: float, slip: float, accel: float, reaction: float,
+               wheel_base: float) -> float:
+    """The fastest turn [rad/s] (inf: none) whose drift fits in ``room`` [m]
+    (:func:`speed_limits`): turning with its wheels w [m/s] apart, a robot whose wheels slip
+    by up to ``slip`` moves along its heading at up to slip w, and keeps drifting while the
+    turn is held for ``reaction`` [s] and ramps down at ``accel`` [m/s^2]. The limit falls
+    with the room: a robot that drifted toward a hazard turns ever slower, and backs or
+    drives away instead (its speed limits keep the margin of :func:`slip_margin`)."""
+    if slip <= 0.0 or math.isinf(room):
+        return math.inf
+    if room <= 0.0:
+        return 0.0
+    return 2.0 * braking_speed(room / slip, accel, reaction) / wheel_base

@@ -49,7 +49,7 @@ from agent.avoidance import (
     tangent_side,
 )
 from agent.config import ControlParams, RobotParams
-from agent.governor import speed_limits
+from agent.governor import slip_margin, speed_limits, turn_limit
 from agent.kinematics import TWO_PI, body_velocity, wheel_command, wrap_angle
 from common.vocabulary import Mode
 
@@ -77,6 +77,7 @@ class LawParams(NamedTuple):
     speed_limit: float  # rev/s per wheel (inf: none)
     ramp: float         # rev/s^2 per wheel (inf: none)
     watchdog: float     # s the drivers go on with the last command should the agent die
+    slip: float         # 1, the wheels' slip the governor allows for (0: none)
     governor: bool      # the safety governor acts
     sidestep: bool      # TRACK passes a neighbour in the way on its right
     pair_hysteresis: bool   # AVOID's hysteresis per pair (else per robot)
@@ -88,8 +89,9 @@ class LawParams(NamedTuple):
         off (sidestep and per-pair hysteresis)."""
         inf = math.inf
         limits = ((robot.a_max, robot.drive_latency, robot.wheel_radius, robot.wheel_base,
-                   robot.wheel_speed_limit, robot.wheel_ramp, robot.watchdog_timeout)
-                  if robot is not None else (inf, 0.0, 1.0, 1.0, inf, inf, 0.0))
+                   robot.wheel_speed_limit, robot.wheel_ramp, robot.watchdog_timeout,
+                   robot.wheel_slip)
+                  if robot is not None else (inf, 0.0, 1.0, 1.0, inf, inf, 0.0, 0.0))
         resolve = control.law != "paper"
         return cls(control.K, control.K_theta, control.D_max, control.K_ij, control.b,
                    control.c, control.u_max, control.hysteresis, *limits, control.governor,
@@ -279,9 +281,14 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     top = TWO_PI * p.wheel_radius * p.speed_limit      # the wheels' own limit [m/s]
     fwd = bwd = math.inf
     if p.governor:
-        fwd, bwd = speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r, haz_half,
-                                haz_moving, p.accel, max(dt, p.watchdog), p.latency, p.u_max,
-                                p.wheel_base, top)
+        # slipping wheels: room kept for the drift of a turn on the spot, turns that fit it
+        hold = max(dt, p.watchdog)
+        fwd, bwd, room = speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r,
+                                      haz_half, haz_moving, p.accel, hold, p.latency,
+                                      p.u_max, p.wheel_base, top,
+                                      slip_margin(p.slip, p.wheel_base))
+        u_cap = turn_limit(room, p.slip, p.accel, hold + p.latency, p.wheel_base)
+        u = min(max(u, -u_cap), u_cap)
     allowed = fwd if v >= 0.0 else bwd
     governed = allowed if abs(v) > allowed and allowed < top else math.inf
     v = min(max(v, -bwd), fwd)

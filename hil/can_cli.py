@@ -203,14 +203,16 @@ def cmd_replay(args: argparse.Namespace, console: Console) -> int:
 
 
 def replay(bus: can.BusABC, frames: list[can.Message], speed: float = 1.0,
-           clock: Callable[[], float] = time.perf_counter,
-           sleep: Callable[[float], None] = time.sleep) -> int:
+           clock: Callable[[], float] | None = None,
+           sleep: Callable[[float], None] | None = None) -> int:
     """Send ``frames`` keeping their relative timing (sleep, then spin the last ms) on
-    ``clock`` [s]."""
+    ``clock`` [s] (default: time.perf_counter and time.sleep, looked up at the call)."""
     if not frames:
         return 0
     if speed <= 0:
         raise ValueError(f"replay speed must be > 0, got {speed}")
+    clock = clock or time.perf_counter
+    sleep = sleep or time.sleep
     start, first = clock(), frames[0].timestamp
     for msg in frames:
         target = start + (msg.timestamp - first) / speed

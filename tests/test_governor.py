@@ -7,7 +7,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.governor import braking_speed, neighbour_hazard, silent_radius, speed_limits, stopping
+from agent.governor import (
+    braking_speed,
+    neighbour_hazard,
+    silent_radius,
+    slip_margin,
+    speed_limits,
+    stopping,
+    turn_limit,
+)
 from agent.kinematics import arc_step
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
@@ -111,7 +119,7 @@ def test_a_silent_neighbour_s_disc_holds_however_its_wheels_brake(v, u, base, ac
 def limits(hx, hy, r=2.0, half=-math.inf, moving=0.0, theta=0.0, v_now=0.0, u_now=0.0,
            turn_rate=0.0, wheel_base=0.0):
     return speed_limits(0.0, 0.0, theta, v_now, u_now, [hx], [hy], [r], [half], [moving],
-                        ACCEL, 0.04, 0.0, turn_rate, wheel_base)
+                        ACCEL, 0.04, 0.0, turn_rate, wheel_base)[:2]
 
 
 def test_a_hazard_ahead_limits_forward_only():
@@ -189,8 +197,8 @@ def test_braking_from_the_allowed_speed_stops_outside_the_hazard(d0, accel, v_to
     x, v, command = 0.0, 0.0, 0.0
     for k in range(int(30.0 / dt)):
         if k % steps_per_period == 0:
-            fwd, _ = speed_limits(x, 0.0, 0.0, command, 0.0, [d0], [0.0], [radius],
-                                  [-math.inf], [0.0], accel, period, latency, 0.0, 0.6)
+            fwd, _, _ = speed_limits(x, 0.0, 0.0, command, 0.0, [d0], [0.0], [radius],
+                                     [-math.inf], [0.0], accel, period, latency, 0.0, 0.6)
             step = accel * period                    # the law's ramp, as the wheels'
             command = min(max(min(v_top, fwd), command - step), command + step)
             if command == 0.0 and v == 0.0:
@@ -248,3 +256,33 @@ def test_a_silent_neighbour_that_died_late_in_its_silence_stays_in_its_disc(v, a
     path += stopping(speed, accel, STOP)
     full, half = neighbour_hazard(v, 0.0, 10.0, A, accel, TOP, STALE, SHARE, STOP)
     assert half == -math.inf and path <= full - A + 1e-9
+
+
+def test_turning_on_the_spot_with_slipping_wheels_never_drifts_into_a_hazard():
+    """A robot ordered to spin at 3 rad/s 5 cm outside a hazard ahead, its wheels slipping
+    by the profile's claim the worst way (the drift always toward the hazard): limited by
+    turn_limit, it drifts ever slower and stays out for a minute; unlimited, it is in
+    within half a second."""
+    slip, base, accel, period = 0.1, 0.8, 2.0, 0.02
+    reaction = period + 0.02
+
+    def drift(limited: bool) -> tuple[float, float]:
+        x, w, room0, first = 0.0, 0.0, 0.05, 0.0   # drift [m], wheels' half difference [m/s]
+        for k in range(int(60.0 / period)):
+            want = 3.0 * base / 2
+            if limited:
+                want = min(want, turn_limit(room0 - x, slip, accel, reaction, base) * base / 2)
+            w = min(max(want, w - accel * period), w + accel * period)   # the wheels' ramp
+            x += slip * w * period
+            if k == 10:
+                first = w
+        return x, first
+
+    x, first = drift(limited=True)
+    assert x <= 0.05 + 1e-12 and first > 0.4     # in the room, having turned at first
+    x, _ = drift(limited=False)
+    assert x > 0.05
+    assert turn_limit(math.inf, slip, accel, reaction, base) == math.inf
+    assert turn_limit(0.1, 0.0, accel, reaction, base) == math.inf
+    assert turn_limit(-0.01, slip, accel, reaction, base) == 0.0
+    assert slip_margin(slip, base) == pytest.approx(0.1 * math.pi * 0.4)

@@ -1,6 +1,7 @@
 """Unit tests of the three-mode bounded law and each addition of docs/controller.md, run
 interpreted (as agents run it) and compiled (as the batch simulator runs it)."""
 import math
+from pathlib import Path
 
 import lawcase
 import numpy as np
@@ -254,3 +255,40 @@ def test_track_does_not_sidestep_a_neighbour_out_of_the_way(nbr):
 def test_track_does_not_sidestep_a_neighbour_beyond_the_reference():
     out = step(single([0, 0, 0], [2, 0], nbrs=[(3, 0)]))
     assert out.mode[0] == Mode.TRACK and out.u[0] == pytest.approx(0.0)
+
+
+def _turn_beside_an_obstacle(robot):
+    """A cart stopped 2 cm outside the governor's disc of an obstacle ahead (clearance a +
+    0.02 m) turns on the spot to a reference on its right, its right wheel slipping 10 %
+    (its left none): the minimum clearance [m] over 6 s and the heading turned [rad]."""
+    from lawcase import Case
+
+    from agent.kinematics import TWO_PI, arc_step, body_velocity
+
+    params = ControlParams()
+    a, r = params.a, 1.0
+    cx = a + r + 0.02
+    pose, mem = (0.0, 0.0, 0.0), LawMemory()
+    worst = math.inf
+    for _ in range(int(6.0 / params.period)):
+        case = Case(pose, (0.0, -20.0), [], [(cx, 0.0, r)], [(cx, 0.0, r + a, -math.inf, 0.0)])
+        out = step(case, mem, params, robot)
+        mem = out.memory
+        # the ground moves by (1 - slip) of each wheel's turn
+        v, u = body_velocity(TWO_PI * mem.wheel_r * 0.9, TWO_PI * mem.wheel_l,
+                             robot.wheel_radius, robot.wheel_base)
+        pose = arc_step(*pose, v * params.period, u * params.period)
+        worst = min(worst, math.hypot(cx - pose[0], pose[1]) - r)
+    return worst, abs(pose[2])
+
+
+def test_a_robot_turning_with_slipping_wheels_beside_an_obstacle_keeps_out_of_a():
+    """The governor limits the turn to the room left for the drift of slipping wheels
+    (controller.md A14), and the robot still turns to its reference."""
+    from hil.robot_profile import load_robot_profile
+
+    cart = load_robot_profile(str(Path(__file__).resolve().parent.parent / "robots"
+                                  / "cart.toml"))
+    a = ControlParams().a
+    worst, turned = _turn_beside_an_obstacle(cart)
+    assert worst > a and turned > 1.0, (worst, turned)
