@@ -98,7 +98,7 @@ class RobotParams:
             "enable_watchdog = True): a wheel goes on with its last command this long "
             "after the last CAN frame to its driver, then idles")
     wheel_slip: float = setting(
-        0.1, unit="1", lo=0.0, hi=0.5,
+        0.0, unit="1", lo=0.0, hi=0.5,
         doc="the most a wheel may slip (the fraction of its turn that does not move the "
             "ground) as the safety governor allows for: unequal slip makes a robot turning "
             "on the spot drift along its heading, so it keeps room for that drift near "

@@ -122,6 +122,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     metrics["pose_error"] = extra["pose_error"]
     metrics["sitl"] = _sitl_metrics(swarm, extra["epoch"], sc.duration,
                                     time.perf_counter() - started)
+    metrics["sitl"]["truth_gap"] = gap = extra["truth_gap"]
     run_folder.write_run(out, metrics, data, sc.source.read_text() if sc.source else None)
     draw_figures(data, sc.obstacles, sc.control.a, sc.control.b, out / run_folder.FIGURES)
     console.print(summary_table(metrics, f"SITL {sc.name}: {len(sc.ids)} agents"))
@@ -146,6 +147,12 @@ def run(args: argparse.Namespace, console: Console) -> int:
         console.print(f"[yellow]warning: the recording lacks {sum(missing.values())} of the "
                       f"{s['recording']['states_published']} states published "
                       f"(per robot: {missing})[/yellow]")
+    if gap["seconds"] > TRUTH_GAP_WARN:
+        console.print(f"[yellow]warning: no truth for {gap['seconds']:.2f} s from t = "
+                      f"{gap['at']:.1f} s: this machine stalled or its clock jumped (a paused "
+                      f"VM); the robots stood still while their reference moved on, so this "
+                      f"run's convergence and distances say nothing about the swarm; run it "
+                      f"again[/yellow]")
     if s["deadline_misses_in_mission"]:
         console.print(f"[yellow]warning: {s['deadline_misses_in_mission']} control periods "
                       f"missed in the mission: this machine could not run {len(sc.ids)} agents "
@@ -157,6 +164,9 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if metrics["collisions"]:
         return EXIT_UNSAFE
     return EXIT_LOST if swarm.lost else EXIT_OK
+
+
+TRUTH_GAP_WARN = 0.25   # s between truth samples (published every 10 ms) worth a warning
 
 
 def describe_world(world: WorldParams) -> str:

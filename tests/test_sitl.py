@@ -76,6 +76,9 @@ def launch(tmp_path):
         launcher.cleanup()
 
 
+# wall clock: a paused and resumed VM jumps the mission's reference ahead of robots that
+# stood still (the run warns "no truth for ... s"); one rerun
+@pytest.mark.flaky(reruns=1)
 def test_sitl_paper_scenario(launch):
     sc = load_scenario(SCENARIOS / "paper.toml")
     # the paper's ideal robot, to compare with the batch simulator's ideal plant
@@ -113,6 +116,7 @@ def test_sitl_paper_scenario(launch):
     else:
         assert s["deadline_misses_in_mission"] <= 3, per_agent
     assert s["deadline_misses_in_mission"] <= s["deadline_misses"]
+    assert s["truth_gap"]["seconds"] < 0.1, s["truth_gap"]
     # after convergence, each robot within 0.5 m of the batch simulation
     data = read_run(run.out)
     batch = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
@@ -142,6 +146,15 @@ def agent_stats(p99: float, tails: dict | None, published: int = 100) -> dict:
     return {"agent": {"neighbour_age_ms": {"p50": 1.0, "p99": p99, "count": 10},
                       "neighbour_age_stages_ms": stages},
             "zenoh": {"published": published}}
+
+
+def test_a_gap_in_the_truth_is_found_with_its_start():
+    from hil.sitl_report import truth_gap
+    samples = np.concatenate([np.arange(0.0, 11.2, 0.01), np.arange(19.5, 20.0, 0.01)])
+    gap = truth_gap(samples)
+    assert gap["seconds"] == pytest.approx(19.5 - samples[1119]) and gap["at"] == samples[1119]
+    assert truth_gap(np.arange(0.0, 5.0, 0.01))["seconds"] == pytest.approx(0.01)
+    assert truth_gap(np.array([1.0])) == {"seconds": 0.0, "at": 0.0}
 
 
 def test_the_worst_agent_and_the_stage_of_its_oldest_data():
