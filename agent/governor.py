@@ -41,15 +41,16 @@ MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nea
 
 
 def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: float,
-                     top_speed: float, staleness: float, share_age: float, stop_time: float
-                     ) -> tuple[float, float]:
+                     top_speed: float, staleness: float, share_age: float, stop_time: float,
+                     wheel_top: float = math.inf) -> tuple[float, float]:
     """(full, half): the exclusion radii [m] around a neighbour's reported position, last
     reported moving at ``speed`` [m/s] and turning with its wheels ``turn`` [m/s] apart
     (half the difference of their ground speeds: |u| times half the wheel base) ``age`` [s]
     ago. This robot owns min(d - full, (d - half) / 2) of a distance d to it (-inf: that
     rule does not apply). ``accel`` [m/s^2] and ``top_speed`` [m/s] bound how its speed
-    can have changed since; ``stop_time`` [s] is how long a dead agent's drivers keep going
-    before they brake (watchdog and drive latency).
+    can have changed since, ``wheel_top`` [m/s] each wheel's ground speed (so the wheels
+    are at most wheel_top - speed apart); ``stop_time`` [s] is how long a dead agent's
+    drivers keep going before they brake (watchdog and drive latency).
 
     Alive (age <= share_age): it runs the same governor on fresh data and keeps to its half
     of the gap beyond a and its travel since the stamp. Perhaps dead (older): also at most
@@ -66,7 +67,9 @@ def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: flo
     if not math.isinf(accel):
         grow = min(grow, speed * age + 0.5 * accel * age * age)
         now = min(now, speed + accel * age)
-        turn_now = turn + accel * age       # each wheel's speed changes at most accel
+        # each wheel's speed changes at most accel and stays within wheel_top; the longest
+        # stop is at the fastest speed, the wheels as far apart as that leaves them
+        turn_now = min(turn + accel * age, max(wheel_top - now, 0.0))
     if age <= share_age and not silent:
         return -math.inf, a + grow
     full = a + grow + stopping(now, accel, stop_time, turn_now)
@@ -76,8 +79,8 @@ def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: flo
 
 
 def silent_radius(speed: float, turn: float, age: float, a: float, accel: float,
-                  top_speed: float, staleness: float, share_age: float, stop_time: float
-                  ) -> float:
+                  top_speed: float, staleness: float, share_age: float, stop_time: float,
+                  wheel_top: float = math.inf) -> float:
     """The radius [m] of the obstacle the law goes round for a silent neighbour (arguments
     as :func:`neighbour_hazard`): its silent disc less a, since the law keeps b > a from an
     obstacle's surface, at least a/2. On a robot that brakes at once (infinite ``accel``)
@@ -86,7 +89,7 @@ def silent_radius(speed: float, turn: float, age: float, a: float, accel: float,
     if math.isinf(accel):
         return 0.5 * a
     full, _ = neighbour_hazard(speed, turn, age, a, accel, top_speed, staleness, share_age,
-                               stop_time)
+                               stop_time, wheel_top)
     return max(0.5 * a, full - a)
 
 
@@ -152,7 +155,9 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     The speeds keep ``margin`` [m] more to every hazard, room for the robot's drift along its
     heading while it turns with slipping wheels (:func:`turn_limit`); the third value is that
     room: the least free distance [m] ahead or behind, margin included, over the cosine of
-    the hazard's angle (inf: none near)."""
+    the hazard's angle, of the hazards the robot is outside of (inf: none near). A disc the
+    robot is already inside (a neighbour's that grew round it as its data aged or it died)
+    leaves no room to keep; not turning would never take the robot out of it."""
     fwd = bwd = room = math.inf
     reaction = period + latency
     ramp = 0.0 if math.isinf(accel) else accel * period   # m/s the speed may differ by in flight
@@ -179,7 +184,8 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
                 off -= MOVING_PAD
             c = 1.0 if d < EPS or off <= 0.0 else math.cos(off)
             if c > EPS:
-                room = min(room, free / c)
+                if free > 0.0:
+                    room = min(room, free / c)
                 going = max(-v_now if backward else v_now, 0.0)      # m/s this way now
                 limit = braking_speed((free - margin) / c - (going + ramp) * latency, accel,
                                       period, turn)

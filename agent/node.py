@@ -446,13 +446,15 @@ class Agent:
             hm.append(0.0)
         return hx, hy, hr, hh, hm
 
-    def _disc_args(self) -> tuple[float, tuple[float, float, float, float, float, float]]:
+    def _disc_args(self) -> tuple[float, tuple[float, float, float, float, float, float,
+                                                float]]:
         """(half the wheel base [m], the arguments of agent.governor.neighbour_hazard after
-        (speed, turn, age)): a, accel, top speed, staleness, sharing age, stop time."""
+        (speed, turn, age)): a, accel, top speed, staleness, sharing age, stop time, the
+        wheels' top speed."""
         s, r = self.s, self.s.robot
         return 0.5 * r.wheel_base, (s.control.a, r.a_max, min(s.control.v_max, r.v_wheel_max),
                                     s.timeouts.staleness, s.control.share_age,
-                                    r.watchdog_timeout + r.drive_latency)
+                                    r.watchdog_timeout + r.drive_latency, r.v_wheel_max)
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],

@@ -165,6 +165,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     truth, seed, step = world_i[0] != 0, world_i[1], world_i[2]
     det_noise, det_dropout = world_f[0], world_f[1]
     staleness, share_age, stop_time, top_speed = world_f[2], world_f[3], world_f[4], world_f[5]
+    wheel_top = TWO_PI * p.wheel_radius * p.speed_limit    # m/s, each wheel's ground speed
     need, need_watch = 0, 0
     max_r = obs[:, 2].max() if len(obs) else 0.0
     nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
@@ -196,7 +197,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3],
                                                   0.5 * view[j, 4] * p.wheel_base, age, a,
                                                   p.accel, top_speed, staleness, share_age,
-                                                  stop_time)
+                                                  stop_time, wheel_top)
             h_r[n_h] += grow
             h_h[n_h] += grow
             h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness
@@ -218,7 +219,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                         o_x[k], o_y[k], o_k[k] = nbr_x[q], nbr_y[q], -1
                         o_r[k] = silent_radius(view[j, 3], 0.5 * view[j, 4] * p.wheel_base,
                                                t - view[j, 5], a, p.accel, top_speed,
-                                               staleness, share_age, stop_time)
+                                               staleness, share_age, stop_time, wheel_top)
                     k += 1
                 elif status == FRESH:
                     nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]

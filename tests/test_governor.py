@@ -116,6 +116,35 @@ def test_a_silent_neighbour_s_disc_holds_however_its_wheels_brake(v, u, base, ac
     assert dead_robot_path(v, u, base, accel, hold, dt=1e-3) <= full - A + 1e-3
 
 
+@settings(max_examples=300, deadline=None)
+@given(v=st.floats(0.0, 3.0), w=st.floats(0.0, 3.0), now=st.floats(0.0, 3.0),
+       apart=st.floats(0.0, 6.0), accel=st.floats(0.5, 30.0), hold=st.floats(0.0, 0.2))
+def test_the_longest_stop_within_the_wheels_limit_is_at_the_fastest_speed(v, w, now, apart,
+                                                                           accel, hold):
+    """Any speed v <= now with wheels w <= apart apart, each wheel within 3 m/s
+    (v + w <= 3), stops within the path neighbour_hazard counts: at ``now``, the wheels as
+    far apart as the limit leaves them."""
+    wheel_top = 3.0
+    v, w = min(v, now), min(w, apart)
+    if v + w > wheel_top:
+        w = wheel_top - v
+    assert stopping(v, accel, hold, w) <= stopping(
+        now, accel, hold, min(apart, wheel_top - now)) + 1e-9
+
+
+def test_the_wheels_limit_shrinks_a_silent_neighbour_s_disc():
+    """A sporty robot (8 m/s, 25 m/s^2) silent after reporting 6.4 m/s: within 0.5 s its
+    wheels could be 12.5 m/s further apart, but not beyond their 8 m/s limit, so it stops
+    as from 8 m/s straight, not spinning."""
+    accel, top, stop = 25.0, 8.0, 0.13
+    args = (6.4, 0.3, 5.0, A, accel, top, STALE, SHARE, stop)
+    free, _ = neighbour_hazard(*args)
+    held, _ = neighbour_hazard(*args, top)
+    travel = min(top * STALE, 6.4 * STALE + 0.5 * accel * STALE ** 2)
+    assert held == pytest.approx(A + travel + stopping(top, accel, stop))
+    assert free - held > 2.0
+
+
 def limits(hx, hy, r=2.0, half=-math.inf, moving=0.0, theta=0.0, v_now=0.0, u_now=0.0,
            turn_rate=0.0, wheel_base=0.0):
     return speed_limits(0.0, 0.0, theta, v_now, u_now, [hx], [hy], [r], [half], [moving],

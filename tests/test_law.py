@@ -292,3 +292,31 @@ def test_a_robot_turning_with_slipping_wheels_beside_an_obstacle_keeps_out_of_a(
     a = ControlParams().a
     worst, turned = _turn_beside_an_obstacle(cart)
     assert worst > a and turned > 1.0, (worst, turned)
+
+
+def test_a_robot_inside_a_disc_that_grew_round_it_still_gets_out():
+    """A neighbour beside a cart falls silent: its disc grows round the cart (3 m, the cart
+    2.5 m from its centre, abeam). Abeam, the disc holds the cart's speed to 0 both ways
+    (the heading the cart may still turn to in its reaction time brings the disc ahead and
+    behind), so only turning gets it out; the disc it is inside does not limit the turn
+    (controller.md A14): it turns, drives off and reaches its reference 20 m ahead."""
+    from lawcase import Case
+
+    from agent.kinematics import arc_step
+    from hil.robot_profile import load_robot_profile
+
+    cart = load_robot_profile(str(Path(__file__).resolve().parent.parent / "robots"
+                                  / "cart.toml"))
+    params = ControlParams()
+    a, silent = params.a, 3.0                # m, the silent neighbour's disc
+    pose, mem = (0.0, 0.0, 0.0), LawMemory()
+    out = step(Case(pose, (20.0, 0.0), [], [(0.0, 2.5, silent - a)],
+                    [(0.0, 2.5, silent, -math.inf, 0.0)]), mem, params, cart)
+    assert out.v[0] == 0.0                   # held both ways at first
+    for _ in range(int(40.0 / params.period)):
+        case = Case(pose, (20.0, 0.0), [], [(0.0, 2.5, silent - a)],
+                    [(0.0, 2.5, silent, -math.inf, 0.0)])
+        out = step(case, mem, params, cart)
+        mem = out.memory
+        pose = arc_step(*pose, out.v[0] * params.period, out.u[0] * params.period)
+    assert math.hypot(pose[0] - 20.0, pose[1]) < 0.5, pose
