@@ -158,7 +158,7 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     the hazard's angle, of the hazards the robot is outside of (inf: none near). A disc the
     robot is already inside (a neighbour's that grew round it as its data aged or it died)
     leaves no room to keep; not turning would never take the robot out of it."""
-    fwd = bwd = room = math.inf
+    room = math.inf
     reaction = period + latency
     ramp = 0.0 if math.isinf(accel) else accel * period   # m/s the speed may differ by in flight
     turn = 0.5 * abs(u_now) * wheel_base                 # m/s, the wheels' half difference
@@ -170,32 +170,45 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     spread = 0.5 * abs(sweep) + bend
     middle = theta + 0.5 * sweep
     reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period, turn)
+    gap_fwd = gap_bwd = math.inf       # m, the least free distance less margin, over c
     for h in range(len(haz_r)):
         dx, dy = haz_x[h] - x, haz_y[h] - y
         d = math.sqrt(dx * dx + dy * dy)
         free = min(d - haz_r[h], 0.5 * (d - haz_half[h]))
         if free >= reach + margin:   # cannot hold the robot below its top speed
             continue
-        bearing = math.atan2(dy, dx)
-        for backward in range(2):
-            heading = middle + math.pi if backward else middle
-            off = abs(wrap_angle(bearing - heading)) - spread
-            if haz_moving[h] != 0.0:
-                off -= MOVING_PAD
-            c = 1.0 if d < EPS or off <= 0.0 else math.cos(off)
-            if c > EPS:
-                if free > 0.0:
-                    room = min(room, free / c)
-                going = max(-v_now if backward else v_now, 0.0)      # m/s this way now
-                limit = braking_speed((free - margin) / c - (going + ramp) * latency, accel,
-                                      period, turn)
-                if going > limit:        # behind the braking curve: brake at the full ramp
-                    limit = 0.0
-                if backward:
-                    bwd = min(bwd, limit)
-                else:
-                    fwd = min(fwd, limit)
+        ahead = abs(wrap_angle(math.atan2(dy, dx) - middle))   # rad from the heading
+        pad = spread + (MOVING_PAD if haz_moving[h] != 0.0 else 0.0)
+        c = _cosine(ahead - pad, d)
+        if c > EPS:
+            if free > 0.0:
+                room = min(room, free / c)
+            gap_fwd = min(gap_fwd, (free - margin) / c)
+        c = _cosine(math.pi - ahead - pad, d)
+        if c > EPS:
+            if free > 0.0:
+                room = min(room, free / c)
+            gap_bwd = min(gap_bwd, (free - margin) / c)
+    # braking_speed grows with the free distance: the nearest hazard each way sets the limit
+    fwd = _limit(gap_fwd, max(v_now, 0.0), ramp, latency, accel, period, turn)
+    bwd = _limit(gap_bwd, max(-v_now, 0.0), ramp, latency, accel, period, turn)
     return fwd, bwd, room
+
+
+def _cosine(off: float, d: float) -> float:
+    """The weight of a hazard ``off`` [rad] beyond the headings the robot sweeps, ``d`` [m]
+    away: 1 within the sweep (or on the robot), none (<= 0) beyond 90 degrees."""
+    return 1.0 if d < EPS or off <= 0.0 else math.cos(off)
+
+
+def _limit(gap: float, going: float, ramp: float, latency: float, accel: float,
+           period: float, turn: float) -> float:
+    """The speed limit [m/s] one way (inf: none) with ``gap`` [m] free that way (over the
+    cosine), going at ``going`` [m/s] that way now (:func:`speed_limits`)."""
+    if math.isinf(gap):
+        return math.inf
+    limit = braking_speed(gap - (going + ramp) * latency, accel, period, turn)
+    return 0.0 if going > limit else limit   # behind the braking curve: brake at the full ramp
 
 
 def slip_margin(slip: float, wheel_base: float) -> float:

@@ -356,8 +356,8 @@ class Agent:
         rx, ry, rvx, rvy = formation.point(0, now_w - mission.epoch)
         self.reference = (rx, ry)
         near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
-        hazards = self._hazards(pose, neighbours, obs_x, obs_y, obs_r, len(near.stale_x),
-                                now_w)
+        hazards = (self._hazards(pose, neighbours, obs_x, obs_y, obs_r, len(near.stale_x),
+                                 now_w) if self.s.control.governor else ([], [], [], [], []))
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
         per_pair = self._law_params.pair_hysteresis
