@@ -63,15 +63,16 @@ def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: flo
     silent = age > staleness
     age = min(max(age, 0.0), staleness)     # silent: it may have died as late as that
     grow = top_speed * age
-    now, turn_now = top_speed, turn
     if not math.isinf(accel):
         grow = min(grow, speed * age + 0.5 * accel * age * age)
+    if age <= share_age and not silent:
+        return -math.inf, a + grow
+    now, turn_now = top_speed, turn
+    if not math.isinf(accel):
         now = min(now, speed + accel * age)
         # each wheel's speed changes at most accel and stays within wheel_top; the longest
         # stop is at the fastest speed, the wheels as far apart as that leaves them
         turn_now = min(turn + accel * age, max(wheel_top - now, 0.0))
-    if age <= share_age and not silent:
-        return -math.inf, a + grow
     full = a + grow + stopping(now, accel, stop_time, turn_now)
     if silent:
         return full, -math.inf
