@@ -119,7 +119,7 @@ def braking_speed(free: float, accel: float, reaction: float, turn: float = 0.0)
     turn = abs(turn)
     if math.isinf(accel):
         return free / reaction if reaction > 0.0 else math.inf
-    if turn > 0.0:
+    if reaction + turn / accel > 0.0:              # (a turn of a few ulp is no turn)
         slow = free / (reaction + turn / accel)    # v <= turn: path v reaction + v turn / a
         if slow <= turn:
             return slow

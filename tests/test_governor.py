@@ -31,6 +31,8 @@ def test_braking_speed_uses_exactly_the_free_distance():
     assert v * 0.04 + v * v / (2 * ACCEL) == pytest.approx(2.0)
     assert braking_speed(0.0, ACCEL, 0.04) == 0.0 and braking_speed(-1.0, ACCEL, 0.04) == 0.0
     assert braking_speed(0.5, math.inf, 0.02) == pytest.approx(25.0)   # an ideal robot
+    # no reaction time and a turn that underflows to nothing over accel (found by hypothesis)
+    assert braking_speed(1.0, 2.0, 0.0, 5e-324) == pytest.approx(braking_speed(1.0, 2.0, 0.0))
 
 
 def test_a_fresh_neighbour_shares_and_grows_by_its_travel_since_its_stamp():
