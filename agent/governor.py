@@ -180,16 +180,14 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
             continue
         ahead = abs(wrap_angle(math.atan2(dy, dx) - middle))   # rad from the heading
         pad = spread + (MOVING_PAD if haz_moving[h] != 0.0 else 0.0)
-        c = _cosine(ahead - pad, d)
-        if c > EPS:
-            if free > 0.0:
-                room = min(room, free / c)
-            gap_fwd = min(gap_fwd, (free - margin) / c)
-        c = _cosine(math.pi - ahead - pad, d)
-        if c > EPS:
-            if free > 0.0:
-                room = min(room, free / c)
-            gap_bwd = min(gap_bwd, (free - margin) / c)
+        c_fwd, c_bwd = _cosine(ahead - pad, d), _cosine(math.pi - ahead - pad, d)
+        if c_fwd > EPS:
+            gap_fwd = min(gap_fwd, (free - margin) / c_fwd)
+        if c_bwd > EPS:
+            gap_bwd = min(gap_bwd, (free - margin) / c_bwd)
+        c = max(c_fwd, c_bwd)
+        if free > 0.0 and c > EPS:
+            room = min(room, free / c)
     # braking_speed grows with the free distance: the nearest hazard each way sets the limit
     fwd = _limit(gap_fwd, max(v_now, 0.0), ramp, latency, accel, period, turn)
     bwd = _limit(gap_bwd, max(-v_now, 0.0), ramp, latency, accel, period, turn)
@@ -230,6 +228,4 @@ def turn_limit(room: float, slip: float, accel: float, reaction: float,
     drives away instead (its speed limits keep the margin of :func:`slip_margin`)."""
     if slip <= 0.0 or math.isinf(room):
         return math.inf
-    if room <= 0.0:
-        return 0.0
     return 2.0 * braking_speed(room / slip, accel, reaction) / wheel_base

@@ -422,7 +422,11 @@ class Agent:
         staleness = s.timeouts.staleness
         x, y, me = pose[0], pose[1], s.robot_id
         reach = s.sensing_range + disc[2] * staleness
-        rows: list[tuple[float, float, float, float, float]] = []
+        hx: list[float] = []
+        hy: list[float] = []
+        hr: list[float] = []
+        hh: list[float] = []
+        hm: list[float] = []
         for rid, rec in neighbours.items():
             m = rec.msg
             dx, dy = m.x - x, m.y - y
@@ -430,13 +434,17 @@ class Agent:
                 continue
             age = now_w - m.stamp
             full, half = neighbour_hazard(m.v, half_base * m.u, age, *disc)
-            rows.append((m.x, m.y, full + grow, half + grow, 1.0 if age <= staleness else 0.0))
-        a = s.control.a
-        rows.extend((obs_x[k], obs_y[k], obs_r[k] + a + grow, -math.inf, 0.0)
-                    for k in range(len(obs_r) - n_stale))
-        if not rows:
-            return [], [], [], [], []
-        hx, hy, hr, hh, hm = (list(c) for c in zip(*rows))
+            hx.append(m.x)
+            hy.append(m.y)
+            hr.append(full + grow)
+            hh.append(half + grow)
+            hm.append(1.0 if age <= staleness else 0.0)
+        for k in range(len(obs_r) - n_stale):
+            hx.append(obs_x[k])
+            hy.append(obs_y[k])
+            hr.append(obs_r[k] + s.control.a + grow)
+            hh.append(-math.inf)
+            hm.append(0.0)
         return hx, hy, hr, hh, hm
 
     def _disc_args(self) -> tuple[float, tuple[float, float, float, float, float, float,
