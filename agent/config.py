@@ -39,9 +39,6 @@ class ControlParams:
     u_max: float = _param(3.0 * math.pi, "rad/s", "clip of the angular speed |u|")
     hysteresis: float = _param(0.5, "m", "leave neighbour-AVOID only beyond b + hysteresis",
                                open_lo=False, param="HYST")
-    share_age: float = _param(0.1, "s", "the safety governor shares the free distance to a "
-                              "neighbour only while its data is younger than this",
-                              open_lo=False, param="SHARE_AGE")
     governor: bool = setting(True, doc="the safety governor limits the speed so that the "
                              "robot can stop before every hazard (false: the law alone, for "
                              "comparisons)")

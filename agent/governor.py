@@ -6,15 +6,15 @@ robot's centre must stay out of, and the robot may move toward it only as fast a
 stop in the free distance it owns, after a reaction time and at its braking deceleration.
 
 * **Hazards.** An obstacle: its detected disc grown by a, taken in full. A neighbour: its
-  *reported* position, grown by a and by what it can have travelled since its stamp (its
-  speed and acceleration over the data age, at most the swarm's top speed). While its data
-  is younger than the sharing age it runs the same governor on fresh data of this robot,
-  so the free distance between them is shared half and half; older, it may also be dead,
-  and this robot keeps out of what it would then still travel (its drivers' watchdog, then
-  each wheel braking to rest on its own: :func:`stopping`) as well. A silent neighbour
-  (older than the staleness limit): a static disc at its last known position grown by a
-  and by what it could travel from its last report until it must have stopped, taken in
-  full.
+  *reported* position, grown by a, by what it can have travelled since its stamp (its speed
+  and acceleration over the data age, at most the swarm's top speed) and by this robot's own
+  path over that age. It runs the same governor, so the free distance between the two is
+  shared half and half: its share is what it claimed when it last acted on data of this
+  robot, and whatever happened since (it may have died then) is on this robot, whose path
+  over the data age the disc counts in full. A silent neighbour (older than the staleness
+  limit): a static disc at its last known position grown by a and by what it could travel
+  from its last report until it must have stopped (its drivers' watchdog, then each wheel
+  braking to rest on its own: :func:`stopping`), taken in full.
 * **Limit.** For a hazard at distance d the robot owns f = min(d - R, (d - R_half) / 2).
   Moving along its heading (or against it, when reversing) at speed v, with c the cosine
   of the angle between the hazard's bearing and the headings the robot can have while it
@@ -40,48 +40,46 @@ EPS = 1e-9
 MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nearer the travel
 
 
-def neighbour_hazard(speed: float, turn: float, age: float, a: float, accel: float,
-                     top_speed: float, staleness: float, share_age: float, stop_time: float,
+def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: float,
+                     accel: float, top_speed: float, staleness: float, stop_time: float,
                      wheel_top: float = math.inf) -> tuple[float, float]:
     """(full, half): the exclusion radii [m] around a neighbour's reported position, last
     reported moving at ``speed`` [m/s] and turning with its wheels ``turn`` [m/s] apart
     (half the difference of their ground speeds: |u| times half the wheel base) ``age`` [s]
-    ago. This robot owns min(d - full, (d - half) / 2) of a distance d to it (-inf: that
-    rule does not apply). ``accel`` [m/s^2] and ``top_speed`` [m/s] bound how its speed
-    can have changed since, ``wheel_top`` [m/s] each wheel's ground speed (so the wheels
-    are at most wheel_top - speed apart); ``stop_time`` [s] is how long a dead agent's
-    drivers keep going before they brake (watchdog and drive latency).
+    ago, ``trail`` [m] this robot's own path since then. This robot owns
+    min(d - full, (d - half) / 2) of a distance d to it (-inf: that rule does not apply).
+    ``accel`` [m/s^2] and ``top_speed`` [m/s] bound how its speed can have changed since,
+    ``wheel_top`` [m/s] each wheel's ground speed (so the wheels are at most
+    wheel_top - speed apart); ``stop_time`` [s] is how long a dead agent's drivers keep
+    going before they brake (watchdog and drive latency).
 
-    Alive (age <= share_age): it runs the same governor on fresh data and keeps to its half
-    of the gap beyond a and its travel since the stamp. Perhaps dead (older): also at most
-    the whole gap less what it would still travel (:func:`stopping`) at the fastest it
-    can now be going and turning. Silent (age > staleness): a static disc grown by what it
-    could travel from its last report until it must have stopped, having died as late as
-    the staleness limit after that report (the perhaps-dead disc at that age: the disc
-    never shrinks as the data ages), taken in full."""
+    Heard from (age <= staleness): half of the gap beyond a, its travel since the stamp and
+    this robot's trail. When it last acted, at its stamp or as late as it lived after it,
+    its governor kept its stop (its drivers' watchdog included, should it die) within half
+    the true gap beyond a then; this robot was at most its trail from where it is now, so
+    the two stops stay a apart (docs/controller.md, A10). Silent (older): a static disc
+    grown by what it could travel from its last report until it must have stopped, having
+    died as late as the staleness limit after that report (the disc never shrinks as the
+    data ages), taken in full."""
     speed, turn = abs(speed), abs(turn)
     silent = age > staleness
     age = min(max(age, 0.0), staleness)     # silent: it may have died as late as that
     grow = top_speed * age
     if not math.isinf(accel):
         grow = min(grow, speed * age + 0.5 * accel * age * age)
-    if age <= share_age and not silent:
-        return -math.inf, a + grow
+    if not silent:
+        return -math.inf, a + grow + trail
     now, turn_now = top_speed, turn
     if not math.isinf(accel):
         now = min(now, speed + accel * age)
         # each wheel's speed changes at most accel and stays within wheel_top; the longest
         # stop is at the fastest speed, the wheels as far apart as that leaves them
         turn_now = min(turn + accel * age, max(wheel_top - now, 0.0))
-    full = a + grow + stopping(now, accel, stop_time, turn_now)
-    if silent:
-        return full, -math.inf
-    return full, a + grow
+    return a + grow + stopping(now, accel, stop_time, turn_now), -math.inf
 
 
-def silent_radius(speed: float, turn: float, age: float, a: float, accel: float,
-                  top_speed: float, staleness: float, share_age: float, stop_time: float,
-                  wheel_top: float = math.inf) -> float:
+def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: float,
+                  staleness: float, stop_time: float, wheel_top: float = math.inf) -> float:
     """The radius [m] of the obstacle the law goes round for a silent neighbour (arguments
     as :func:`neighbour_hazard`): its silent disc less a, since the law keeps b > a from an
     obstacle's surface, at least a/2. On a robot that brakes at once (infinite ``accel``)
@@ -89,7 +87,7 @@ def silent_radius(speed: float, turn: float, age: float, a: float, accel: float,
     limit, metres for a neighbour silent for a moment, and such discs scatter a formation."""
     if math.isinf(accel):
         return 0.5 * a
-    full, _ = neighbour_hazard(speed, turn, age, a, accel, top_speed, staleness, share_age,
+    full, _ = neighbour_hazard(speed, turn, math.inf, 0.0, a, accel, top_speed, staleness,
                                stop_time, wheel_top)
     return max(0.5 * a, full - a)
 

@@ -36,6 +36,7 @@ from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry, Pose
 from agent.pose import PoseFusion
 from agent.progress import PROGRESS, ProgressWatch, tolerance
+from agent.trail import Trail
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import FixPort, MotorPort, SwarmPort
 from common.schema import ConfigError, Param
@@ -128,6 +129,7 @@ class Agent:
         if self.fusion is not None and fixes is None:
             raise ValueError("[pose] is configured: the agent needs the port of its fixes")
         self.pose: Pose = self.odometry.pose   # the estimate the agent acts on
+        self.trail = Trail(settings.timeouts.staleness)   # its path, for the governor
         self.memory = LawMemory()
         self._held: set[int] = set()       # neighbours whose pair was active (law.pair_active)
         self.progress = ProgressWatch(settings.timeouts.deadlock)
@@ -220,6 +222,8 @@ class Agent:
             self.odometry.update(*fb.pos_rev)
         self.last_feedback = fb
         pose = self._estimate(now_w)
+        self.trail.span = self.s.timeouts.staleness      # (a setting changed on the fly)
+        self.trail.record(now_w, pose[0], pose[1])
         mission = self.swarm.mission()
         # every period whatever the mode: the same work each tick (nothing piles up in the
         # rings until the mission starts, when every agent would drain them at once)
@@ -433,7 +437,8 @@ class Agent:
             if rid == me or dx * dx + dy * dy > reach * reach:
                 continue
             age = now_w - m.stamp
-            full, half = neighbour_hazard(m.v, half_base * m.u, age, *disc)
+            full, half = neighbour_hazard(m.v, half_base * m.u, age,
+                                          self.trail.since(m.stamp), *disc)
             hx.append(m.x)
             hy.append(m.y)
             hr.append(full + grow)
@@ -447,15 +452,14 @@ class Agent:
             hm.append(0.0)
         return hx, hy, hr, hh, hm
 
-    def _disc_args(self) -> tuple[float, tuple[float, float, float, float, float, float,
-                                                float]]:
+    def _disc_args(self) -> tuple[float, tuple[float, float, float, float, float, float]]:
         """(half the wheel base [m], the arguments of agent.governor.neighbour_hazard after
-        (speed, turn, age)): a, accel, top speed, staleness, sharing age, stop time, the
-        wheels' top speed."""
+        (speed, turn, age, trail)): a, accel, top speed, staleness, stop time, the wheels' top
+        speed."""
         s, r = self.s, self.s.robot
         return 0.5 * r.wheel_base, (s.control.a, r.a_max, min(s.control.v_max, r.v_wheel_max),
-                                    s.timeouts.staleness, s.control.share_age,
-                                    r.watchdog_timeout + r.drive_latency, r.v_wheel_max)
+                                    s.timeouts.staleness, r.watchdog_timeout + r.drive_latency,
+                                    r.v_wheel_max)
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],
@@ -478,7 +482,7 @@ class Agent:
             half_base, disc = self._disc_args()
             for i in near.stale:
                 m = recs[i].msg
-                obs_r.append(silent_radius(m.v, half_base * m.u, now_w - m.stamp, *disc))
+                obs_r.append(silent_radius(m.v, half_base * m.u, *disc))
         return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:

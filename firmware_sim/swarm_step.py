@@ -152,7 +152,8 @@ def _watch(i: int, x: float, y: float, m: int, k: int, nbr_d: np.ndarray,
 
 
 def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np.ndarray,
-                   view: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, held: np.ndarray,
+                   view: np.ndarray, trail: np.ndarray, mem_f: np.ndarray,
+                   mem_i: np.ndarray, held: np.ndarray,
                    offsets: np.ndarray,
                    motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams,
                    period: float, sensing_range: float, a: float, reach: float, cap: int,
@@ -164,7 +165,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     out_cmd, out_ref, out_mem_f, out_mem_i, out_held, out_near, watch_j, watch_k = outs
     truth, seed, step = world_i[0] != 0, world_i[1], world_i[2]
     det_noise, det_dropout = world_f[0], world_f[1]
-    staleness, share_age, stop_time, top_speed = world_f[2], world_f[3], world_f[4], world_f[5]
+    staleness, stop_time, top_speed = world_f[2], world_f[3], world_f[4]
+    back = trail.shape[1] - 1           # periods of the robots' own path kept
     wheel_top = TWO_PI * p.wheel_radius * p.speed_limit    # m/s, each wheel's ground speed
     need, need_watch = 0, 0
     max_r = obs[:, 2].max() if len(obs) else 0.0
@@ -194,10 +196,12 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             if not truth and seen[j, 2] == NONE:
                 continue
             age = t - view[j, 5]
+            # this robot's path since the stamp: from the period at or before it
+            ago = min(max(int(math.ceil(age / period - 1e-9)), 0), back)
             h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3],
-                                                  0.5 * view[j, 4] * p.wheel_base, age, a,
-                                                  p.accel, top_speed, staleness, share_age,
-                                                  stop_time, wheel_top)
+                                                  0.5 * view[j, 4] * p.wheel_base, age,
+                                                  trail[i, ago], a, p.accel, top_speed,
+                                                  staleness, stop_time, wheel_top)
             h_r[n_h] += grow
             h_h[n_h] += grow
             h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness
@@ -218,8 +222,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                         j = nbr_j[q]
                         o_x[k], o_y[k], o_k[k] = nbr_x[q], nbr_y[q], -1
                         o_r[k] = silent_radius(view[j, 3], 0.5 * view[j, 4] * p.wheel_base,
-                                               t - view[j, 5], a, p.accel, top_speed,
-                                               staleness, share_age, stop_time, wheel_top)
+                                               a, p.accel, top_speed, staleness, stop_time,
+                                               wheel_top)
                     k += 1
                 elif status == FRESH:
                     nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]
@@ -284,7 +288,8 @@ def _sorted(pos: np.ndarray, grid: Grid) -> np.ndarray:
 
 
 def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarray,
-            mem_f: np.ndarray, mem_i: np.ndarray, held: np.ndarray, offsets: np.ndarray,
+            trail: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, held: np.ndarray,
+            offsets: np.ndarray,
             motion: np.ndarray,
             t: float, obs: np.ndarray, p: LawParams, period: float, sensing_range: float, a: float,
             reach: float, cap: int, watch_cap: int, world_i: np.ndarray,
@@ -297,10 +302,11 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
     (N, 4 with a pose source: and its position uncertainty [m], which grows every hazard);
     seen (N, 3) where the robots believe the others are: x, y [m] and NONE, FRESH or STALE
     (:mod:`firmware_sim.world_step`); view (N, 6) the states they last received from each
-    other (x, y, theta, v, u, stamp [s]), for the governor's hazards; world_i = (1 when own
-    and seen are the truth and detections exact, seed, period number), world_f =
-    (detection noise [m], detection dropout, staleness [s], sharing age [s], stop time
-    of a dead agent [s], top speed [m/s]) (:func:`agent.governor.neighbour_hazard`; a
+    other (x, y, theta, v, u, stamp [s]), for the governor's hazards; trail (N, K) [m] the
+    path of each robot's believed position over its last k periods (k < K; older data
+    counts k = K - 1); world_i = (1 when own and seen are the truth and detections exact,
+    seed, period number), world_f = (detection noise [m], detection dropout, staleness [s],
+    stop time of a dead agent [s], top speed [m/s]) (:func:`agent.governor.neighbour_hazard`; a
     stale neighbour is an obstacle of :func:`agent.governor.silent_radius`). Memory of
     :class:`LawMemory` as floats (N, 7): prev_ex, prev_ey, center_x, center_y, radius,
     wheel_r, wheel_l, and
@@ -338,9 +344,10 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
         # the robots of a chunk in a plain function: numba optimises it better than the
         # body of a parallel loop
         need[chunk, 0], need[chunk, 1] = _control_range(
-            chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, view, mem_f, mem_i,
-            held, offsets, motion, t, obs, p, period, sensing_range, a, reach, cap, watch_cap,
-            world_i, world_f, sorted_seen, seen_grid, sorted_xy, grid, obs_grid, outs)
+            chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, view, trail, mem_f,
+            mem_i, held, offsets, motion, t, obs, p, period, sensing_range, a, reach, cap,
+            watch_cap, world_i, world_f, sorted_seen, seen_grid, sorted_xy, grid, obs_grid,
+            outs)
     return (need[:, 0].max(), need[:, 1].max()) if chunks else (0, 0)
 
 

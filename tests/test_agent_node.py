@@ -1,4 +1,6 @@
 """The agent's read -> update -> write over in-memory ports, on simulated time."""
+import math
+
 import numpy as np
 import pytest
 from fakes import MirrorMotor, SharedSwarm
@@ -143,7 +145,7 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     a.set_mode(AgentMode.FORMATION)
     near, obs_x, obs_y, obs_r = a._surroundings(a.odometry.pose, a.swarm.neighbours(),
                                                 a.swarm.obstacles(), clock.wall())
-    disc = neighbour_hazard(0.0, 0.0, 1.0, 1.0, cart.a_max, cart.v_wheel_max, 0.5, 0.1,
+    disc = neighbour_hazard(0.0, 0.0, 1.0, 0.0, 1.0, cart.a_max, cart.v_wheel_max, 0.5,
                             0.1 + cart.drive_latency)[0]
     assert disc == pytest.approx(1.87, abs=0.01)
     assert near.fresh_x == [] and (obs_x, obs_y) == ([4.0], [0.0])
@@ -275,6 +277,34 @@ def test_a_cart_brakes_for_a_dead_robot_through_its_governor():
     assert closest > agent.s.control.a
     assert agent.counters.governed > 0 and flagged
     assert agent.counters.summary()["governor_min_allowed"] < cart.v_wheel_max
+
+
+def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
+    """A robot reported still 0.3 s ago (older than a period, within the staleness limit):
+    its shared disc is a, what it can have travelled since, and the path this agent drove
+    in those 0.3 s, read off its own odometry."""
+    cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
+                       drive_latency=0.02)
+    clock, net, (agent, other) = make_swarm([(0.0, 0.0, 0.0), (0.0, 6.0, 0.0)],
+                                            [(30.0, 0.0), (0.0, 6.0)], robot=cart)
+    agent.arm()
+    agent.set_mode(AgentMode.FORMATION)
+    for _ in range(50):                          # 1 s: up to speed along x
+        agent.tick()
+        other.tick()
+        clock.now += 0.02
+    stamp, x0 = clock.wall(), agent.odometry.pose[0]
+    other.tick()                                 # its last report
+    for _ in range(15):
+        clock.now += 0.02
+        agent.tick()
+    age, driven = clock.wall() - stamp, agent.odometry.pose[0] - x0
+    assert driven > 0.3 and age == pytest.approx(0.3)
+    hx, hy, hr, hh, hm = agent._hazards(agent.odometry.pose, agent.swarm.neighbours(), [],
+                                        [], [], 0, clock.wall())
+    travel = 0.5 * cart.a_max * age ** 2         # reported still: it can only have sped up
+    assert hr == [-math.inf]
+    assert hh == [pytest.approx(agent.s.control.a + travel + driven, rel=1e-6)]
 
 
 def test_neighbour_age_is_split_into_stages_and_the_tail_names_the_slow_one():

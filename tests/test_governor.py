@@ -23,7 +23,7 @@ from firmware_sim.world import WorldParams
 from hil.robot_profile import load_robot_profile
 from hil.scenario import load_scenario
 
-A, ACCEL, TOP, STALE, SHARE, STOP = 1.0, 2.0, 3.0, 0.5, 0.1, 0.12
+A, ACCEL, TOP, STALE, STOP = 1.0, 2.0, 3.0, 0.5, 0.12
 
 
 def test_braking_speed_uses_exactly_the_free_distance():
@@ -35,33 +35,62 @@ def test_braking_speed_uses_exactly_the_free_distance():
     assert braking_speed(1.0, 2.0, 0.0, 5e-324) == pytest.approx(braking_speed(1.0, 2.0, 0.0))
 
 
-def test_a_fresh_neighbour_shares_and_grows_by_its_travel_since_its_stamp():
-    full, half = neighbour_hazard(2.0, 0.0, 0.05, A, ACCEL, TOP, STALE, SHARE, STOP)
-    assert full == -math.inf                                # alive: it keeps to its half
-    assert half == pytest.approx(A + 2.0 * 0.05 + 0.5 * ACCEL * 0.05 ** 2)
+def test_a_neighbour_heard_from_shares_beyond_its_travel_and_this_robot_s_trail():
+    """However old its data (within the staleness limit): half the gap beyond a, what it
+    can have travelled since its stamp and this robot's own path since then."""
+    for age in (0.05, 0.3, STALE):
+        full, half = neighbour_hazard(2.0, 0.0, age, 0.4, A, ACCEL, TOP, STALE, STOP)
+        assert full == -math.inf
+        travel = min(TOP * age, 2.0 * age + 0.5 * ACCEL * age ** 2)
+        assert half == pytest.approx(A + travel + 0.4)
 
 
-def test_an_older_neighbour_may_be_dead_and_still_travel_its_stopping_distance():
-    age = 0.3
-    full, half = neighbour_hazard(2.0, 0.0, age, A, ACCEL, TOP, STALE, SHARE, STOP)
-    now = min(2.0 + ACCEL * age, TOP)                       # the fastest it can be going now
-    turn = ACCEL * age                                      # and its wheels can be apart
-    travel = min(TOP * age, 2.0 * age + 0.5 * ACCEL * age ** 2)
-    assert half == pytest.approx(A + travel)
-    assert full == pytest.approx(A + travel + stopping(now, ACCEL, STOP, turn))
-    assert full > A + travel + stopping(now, ACCEL, STOP)
+@settings(max_examples=500, deadline=None)
+@given(pts=st.lists(st.floats(-10.0, 10.0), min_size=8, max_size=8),
+       fr=st.lists(st.floats(0.0, 1.0), min_size=2, max_size=2))
+def test_sharing_with_old_data_keeps_two_stops_apart_should_the_neighbour_die(pts, fr):
+    """The argument of A10 on points: neighbour j last reported from s; it lived on until
+    some time when it was at q (within its travel bound g of s) and this robot was at p0,
+    and there its governor kept its stop within half the true gap beyond a. Since then this
+    robot went to p (its trail: at least |p - p0|) and keeps its stop within half of
+    |p - s| beyond its disc of j. Wherever each stop ends in its bound, the two are at least
+    a apart; without the trail they are not always."""
+    s, q, p0, p = (pts[0:2], pts[2:4], pts[4:6], pts[6:8])
+    dist = math.dist
+    g, trail = dist(s, q) * (1.0 + fr[0]), dist(p0, p) * (1.0 + fr[1])
+    own = 0.5 * (dist(s, p) - A - g - trail)         # this robot's share of the gap
+    theirs = 0.5 * (dist(q, p0) - A)                 # the neighbour's, when it last acted
+    if own < 0.0 or theirs < 0.0:
+        return
+    # each stop ends anywhere in its bound: the worst, both on the line between them
+    assert dist(p, q) - own - theirs >= A - 1e-9
+
+
+def test_without_the_trail_a_dead_neighbour_s_half_is_taken_twice():
+    """Head on: j stopped reporting 5 m away, having claimed half the 4 m beyond a, and
+    died. This robot drove 1 m toward it since. Sharing the gap it sees now without its
+    trail, its stop and j's overlap; with the trail they end a apart."""
+    s = q = (5.0, 0.0)
+    p0, p = (0.0, 0.0), (1.0, 0.0)
+    theirs = 0.5 * (math.dist(q, p0) - A)
+    _, half = neighbour_hazard(0.0, 0.0, 0.3, 0.0, A, ACCEL, 0.0, STALE, STOP)
+    own_without = 0.5 * (math.dist(p, s) - half)
+    _, half = neighbour_hazard(0.0, 0.0, 0.3, 1.0, A, ACCEL, 0.0, STALE, STOP)
+    own = 0.5 * (math.dist(p, s) - half)
+    assert math.dist(p, q) - own_without - theirs < A - 0.4
+    assert math.dist(p, q) - own - theirs == pytest.approx(A)
 
 
 def test_a_silent_neighbour_is_a_static_disc_grown_until_it_must_have_stopped():
     """Reported at 2 m/s straight: it may have driven on until the staleness limit, its
     speed reaching 3 m/s and its wheels drifting up to ACCEL x STALE apart, then held its
     command for the stop time and braked each wheel."""
-    full, half = neighbour_hazard(2.0, 0.0, 5.0, A, ACCEL, TOP, STALE, SHARE, STOP)
+    full, half = neighbour_hazard(2.0, 0.0, 5.0, 0.0, A, ACCEL, TOP, STALE, STOP)
     assert half == -math.inf
     now, apart = 2.0 + ACCEL * STALE, ACCEL * STALE
     assert full == pytest.approx(A + 2.0 * STALE + 0.5 * ACCEL * STALE ** 2 + now * STOP
                                  + (now ** 2 + apart ** 2) / (2 * ACCEL))
-    assert neighbour_hazard(2.0, 0.0, 50.0, A, ACCEL, TOP, STALE, SHARE, STOP)[0] == full
+    assert neighbour_hazard(2.0, 0.0, 50.0, 0.0, A, ACCEL, TOP, STALE, STOP)[0] == full
 
 
 def test_the_law_goes_round_a_silent_neighbour_as_its_disc_less_a():
@@ -69,12 +98,12 @@ def test_the_law_goes_round_a_silent_neighbour_as_its_disc_less_a():
     disc less a, so the law's path stays outside the governor's disc and the robot does not
     wait at its edge; at least a/2, and a/2 on a robot that brakes at once (there the disc
     is metres for a neighbour silent a moment)."""
-    disc = (1.0, 2.0, 3.0, 0.5, 0.1, 0.12)         # a, accel, top speed, staleness, ...
-    full, _ = neighbour_hazard(1.5, 0.2, 0.8, *disc)
-    assert silent_radius(1.5, 0.2, 0.8, *disc) == pytest.approx(full - 1.0)
+    disc = (1.0, 2.0, 3.0, 0.5, 0.12)         # a, accel, top speed, staleness, stop time
+    full, _ = neighbour_hazard(1.5, 0.2, 0.8, 0.0, *disc)
+    assert silent_radius(1.5, 0.2, *disc) == pytest.approx(full - 1.0)
     assert full - 1.0 > 2.0
-    assert silent_radius(1.5, 0.2, 0.8, 1.0, math.inf, 3.0, 0.5, 0.1, 0.12) == 0.5
-    assert silent_radius(0.0, 0.0, 0.8, 4.0, 50.0, 0.1, 0.5, 0.1, 0.0) == 2.0   # a/2 floor
+    assert silent_radius(1.5, 0.2, 1.0, math.inf, 3.0, 0.5, 0.12) == 0.5
+    assert silent_radius(0.0, 0.0, 4.0, 50.0, 0.1, 0.5, 0.0) == 2.0   # a/2 floor
 
 
 def dead_robot_path(v, u, base, accel, hold, dt=1e-4):
@@ -104,7 +133,7 @@ def test_a_dead_spinning_robot_travels_farther_than_its_reported_speed_says():
     v, u, base, accel = -0.63, 3.826, 0.8, 2.0
     far = dead_robot_path(v, u, base, accel, STOP)
     assert far > stopping(abs(v), accel, STOP) + 0.2
-    full, half = neighbour_hazard(v, 0.5 * u * base, 5.0, A, accel, TOP, STALE, SHARE, STOP)
+    full, half = neighbour_hazard(v, 0.5 * u * base, 5.0, 0.0, A, accel, TOP, STALE, STOP)
     assert half == -math.inf and full - A >= far
 
 
@@ -114,7 +143,7 @@ def test_a_dead_spinning_robot_travels_farther_than_its_reported_speed_says():
 def test_a_silent_neighbour_s_disc_holds_however_its_wheels_brake(v, u, base, accel, hold):
     """Whatever it was doing when its agent died, a silent neighbour's centre stays in the
     disc the governor keeps out of (less a), its wheels braking each on its own."""
-    full, _ = neighbour_hazard(v, 0.5 * u * base, 5.0, A, accel, TOP, STALE, SHARE, hold)
+    full, _ = neighbour_hazard(v, 0.5 * u * base, 5.0, 0.0, A, accel, TOP, STALE, hold)
     assert dead_robot_path(v, u, base, accel, hold, dt=1e-3) <= full - A + 1e-3
 
 
@@ -139,7 +168,7 @@ def test_the_wheels_limit_shrinks_a_silent_neighbour_s_disc():
     wheels could be 12.5 m/s further apart, but not beyond their 8 m/s limit, so it stops
     as from 8 m/s straight, not spinning."""
     accel, top, stop = 25.0, 8.0, 0.13
-    args = (6.4, 0.3, 5.0, A, accel, top, STALE, SHARE, stop)
+    args = (6.4, 0.3, 5.0, 0.0, A, accel, top, STALE, stop)
     free, _ = neighbour_hazard(*args)
     held, _ = neighbour_hazard(*args, top)
     travel = min(top * STALE, 6.4 * STALE + 0.5 * accel * STALE ** 2)
@@ -265,11 +294,15 @@ def test_real_robots_keep_their_distance_in_the_bundled_scenarios(scenario, prof
 @given(v=st.floats(0.0, 6.0), accel=st.floats(0.5, 25.0), age=st.floats(0.0, 3.0),
        later=st.floats(0.0, 3.0))
 def test_a_neighbour_s_disc_never_shrinks_as_its_data_ages(v, accel, age, later):
-    """Fresh, perhaps dead, silent: the full disc only grows with the data's age (it shrank
-    when the neighbour became silent, from its travel since the report to its braking)."""
-    def full(t):
-        return neighbour_hazard(v, 0.0, t, A, accel, TOP, STALE, SHARE, STOP)[0]
-    assert full(age + later) >= full(age) - 1e-12
+    """Heard from, the shared disc only grows with the data's age; silent, the full disc is
+    the one it has at the staleness limit, however old the data."""
+    def disc(t):
+        return neighbour_hazard(v, 0.0, t, 0.0, A, accel, TOP, STALE, STOP)
+    (full0, half0), (full1, half1) = disc(age), disc(age + later)
+    if age + later <= STALE:
+        assert full0 == full1 == -math.inf and half1 >= half0 - 1e-12
+    elif age > STALE:
+        assert half0 == half1 == -math.inf and full1 == full0 > A
 
 
 @settings(max_examples=100, deadline=None)
@@ -285,7 +318,7 @@ def test_a_silent_neighbour_that_died_late_in_its_silence_stays_in_its_disc(v, a
     path = v * t1 + 0.5 * accel * t1 * t1 + TOP * max(drive - top_at, 0.0)
     speed = min(v + accel * drive, TOP)
     path += stopping(speed, accel, STOP)
-    full, half = neighbour_hazard(v, 0.0, 10.0, A, accel, TOP, STALE, SHARE, STOP)
+    full, half = neighbour_hazard(v, 0.0, 10.0, 0.0, A, accel, TOP, STALE, STOP)
     assert half == -math.inf and path <= full - A + 1e-9
 
 
