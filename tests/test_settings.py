@@ -228,13 +228,20 @@ def test_zenoh_threads_inherit_the_scheduling_of_the_thread_that_opens_the_sessi
         from agent.loop import use_realtime
         from transport.zenoh_link import open_session, session_config
         granted = use_realtime(4)
+        import time
         session = open_session(session_config("peer"), "test")
         policies = {}
-        for tid in os.listdir("/proc/self/task"):
-            name = open(f"/proc/self/task/{tid}/comm").read().strip()
-            if name.startswith(("rx-", "tx-", "app-", "net-", "acc-")):
-                policies[name] = (os.sched_getscheduler(int(tid)),
-                                  os.sched_getparam(int(tid)).sched_priority)
+        end = time.monotonic() + 10.0       # its runtimes may start their threads late
+        while not policies and time.monotonic() < end:
+            time.sleep(0.05)
+            for tid in os.listdir("/proc/self/task"):
+                try:
+                    name = open(f"/proc/self/task/{tid}/comm").read().strip()
+                    if name.startswith(("rx-", "tx-", "app-", "net-", "acc-")):
+                        policies[name] = (os.sched_getscheduler(int(tid)),
+                                          os.sched_getparam(int(tid)).sched_priority)
+                except (FileNotFoundError, ProcessLookupError):
+                    pass                    # a thread that ended meanwhile
         session.close()
         print(granted, sorted(set(policies.values())), len(policies))
     """
