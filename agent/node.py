@@ -222,7 +222,6 @@ class Agent:
             self.odometry.update(*fb.pos_rev)
         self.last_feedback = fb
         pose = self._estimate(now_w)
-        self.trail.span = self.s.timeouts.staleness      # (a setting changed on the fly)
         self.trail.record(now_w, pose[0], pose[1])
         mission = self.swarm.mission()
         # every period whatever the mode: the same work each tick (nothing piles up in the

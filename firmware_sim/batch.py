@@ -175,14 +175,14 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     for step in range(steps + 1):
         t = step * T
         t0 = clock() if clock else 0.0
-        own, seen, view, trail, world_i = w.before_control(step, t, pose, cmd)
+        own, seen, view, path, world_i = w.before_control(step, t, pose, cmd)
         if w.pose_source is not None:       # agent.law.moved_estimate, for every robot
             mem_f[:, :2] += w.pose_source.jump
         if own is not pose:
             metrics.max_pose_error = max(metrics.max_pose_error, float(
                 np.hypot(own[:, 0] - pose[:, 0], own[:, 1] - pose[:, 1]).max(initial=0.0)))
         while True:
-            need, need_watch = k.control(pose, own, seen, view, trail, mem_f, mem_i, held, offsets,
+            need, need_watch = k.control(pose, own, seen, view, path, mem_f, mem_i, held, offsets,
                                          motion, t, obs, params, T, options.sensing_range,
                                          control.a, reach, cap, watch_cap, world_i, w.world_f,
                                          cmd, ref, new_f, new_i, new_held, near, watch_j,
@@ -293,34 +293,31 @@ class _WorldState:
         self.bad = np.zeros(n, np.int64)
         self.slip = np.zeros((n, 2))
         self.seen = np.zeros((n, 3))
-        # each robot's path [m] over its last periods, for the governor (swarm_step.control):
-        # the cumulative path of its believed position, a ring of it, and the differences
-        self.path, self.last_xy = np.zeros(n), pose[:, :2].copy()
-        back = int(math.ceil(self.staleness / period)) + 1
-        self.path_ring = np.zeros((back + 1, n))
-        self.trail = np.zeros((n, 1 if self.truth else back + 1))
+        # the cumulative path [m] of each robot's believed position, a ring over its last
+        # periods (swarm_step.control; at rest: none)
+        self.last_xy = pose[:, :2].copy()
+        self.path_ring = np.zeros((1 if self.truth else
+                                   int(math.ceil(self.staleness / period)) + 2, n))
 
     def before_control(self, step: int, t: float, pose: np.ndarray, cmd: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(own pose, seen positions, received states, own trails, world_i) for
+        """(own pose, seen positions, received states, own paths, world_i) for
         :func:`swarm_step.control` at t [s]; ``cmd`` holds the last period's commands."""
         np.less(t, self.kill_at, out=self.alive)
         if self.truth:              # everyone knows everyone's current state (no age)
             self.view[:, :3], self.view[:, 3:5], self.view[:, 5] = pose, cmd[:, :2], t
-            return pose, pose, self.view, self.trail, np.array([1, 0, step], np.int64)
+            return pose, pose, self.view, self.path_ring, np.array([1, 0, step], np.int64)
         self.k.deliver(t, self.hist, self.arrive, self.view, self.staleness, self.seen)
         own = self.est if self.world.odometry else pose
         if self.pose_source is not None:
             own = self.pose_source.step(step, t, self.est, pose)
-        self.path += np.hypot(own[:, 0] - self.last_xy[:, 0], own[:, 1] - self.last_xy[:, 1])
-        self.last_xy[:] = own[:, :2]
         ring = len(self.path_ring)
-        self.path_ring[step % ring] = self.path
-        # k periods ago (slots not written yet hold the start's 0)
-        ago = (step - np.arange(ring)) % ring
-        np.subtract(self.path[:, None], self.path_ring[ago].T, out=self.trail)
-        return own, self.seen, self.view, self.trail, np.array([0, self.world.seed, step],
-                                                                np.int64)
+        np.add(self.path_ring[(step - 1) % ring], np.hypot(own[:, 0] - self.last_xy[:, 0],
+                                                           own[:, 1] - self.last_xy[:, 1]),
+               out=self.path_ring[step % ring])
+        self.last_xy[:] = own[:, :2]
+        return own, self.seen, self.view, self.path_ring, np.array([0, self.world.seed, step],
+                                                                    np.int64)
 
     def after_control(self, step: int, t: float, own: np.ndarray, cmd: np.ndarray) -> None:
         """Dead agents command nothing new (their drivers hold the last command until

@@ -152,7 +152,7 @@ def _watch(i: int, x: float, y: float, m: int, k: int, nbr_d: np.ndarray,
 
 
 def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np.ndarray,
-                   view: np.ndarray, trail: np.ndarray, mem_f: np.ndarray,
+                   view: np.ndarray, path: np.ndarray, mem_f: np.ndarray,
                    mem_i: np.ndarray, held: np.ndarray,
                    offsets: np.ndarray,
                    motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams,
@@ -166,7 +166,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     truth, seed, step = world_i[0] != 0, world_i[1], world_i[2]
     det_noise, det_dropout = world_f[0], world_f[1]
     staleness, stop_time, top_speed = world_f[2], world_f[3], world_f[4]
-    back = trail.shape[1] - 1           # periods of the robots' own path kept
+    ring = len(path)                    # periods of the robots' own path kept
     wheel_top = TWO_PI * p.wheel_radius * p.speed_limit    # m/s, each wheel's ground speed
     need, need_watch = 0, 0
     max_r = obs[:, 2].max() if len(obs) else 0.0
@@ -197,11 +197,12 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 continue
             age = t - view[j, 5]
             # this robot's path since the stamp: from the period at or before it
-            ago = min(max(int(math.ceil(age / period - 1e-9)), 0), back)
+            ago = min(max(int(math.ceil(age / period - 1e-9)), 0), ring - 1)
+            trail = path[step % ring, i] - path[(step - ago) % ring, i]
             h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3],
                                                   0.5 * view[j, 4] * p.wheel_base, age,
-                                                  trail[i, ago], a, p.accel, top_speed,
-                                                  staleness, stop_time, wheel_top)
+                                                  trail, a, p.accel, top_speed, staleness,
+                                                  stop_time, wheel_top)
             h_r[n_h] += grow
             h_h[n_h] += grow
             h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness
@@ -288,7 +289,7 @@ def _sorted(pos: np.ndarray, grid: Grid) -> np.ndarray:
 
 
 def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarray,
-            trail: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, held: np.ndarray,
+            path: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, held: np.ndarray,
             offsets: np.ndarray,
             motion: np.ndarray,
             t: float, obs: np.ndarray, p: LawParams, period: float, sensing_range: float, a: float,
@@ -302,9 +303,10 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
     (N, 4 with a pose source: and its position uncertainty [m], which grows every hazard);
     seen (N, 3) where the robots believe the others are: x, y [m] and NONE, FRESH or STALE
     (:mod:`firmware_sim.world_step`); view (N, 6) the states they last received from each
-    other (x, y, theta, v, u, stamp [s]), for the governor's hazards; trail (N, K) [m] the
-    path of each robot's believed position over its last k periods (k < K; older data
-    counts k = K - 1); world_i = (1 when own and seen are the truth and detections exact,
+    other (x, y, theta, v, u, stamp [s]), for the governor's hazards; path (K, N) [m] the
+    cumulative path of each robot's believed position, a ring over its last K periods
+    (period number p in row p % K; rows not written yet 0, the start; older data counts
+    K - 1 periods); world_i = (1 when own and seen are the truth and detections exact,
     seed, period number), world_f = (detection noise [m], detection dropout, staleness [s],
     stop time of a dead agent [s], top speed [m/s]) (:func:`agent.governor.neighbour_hazard`; a
     stale neighbour is an obstacle of :func:`agent.governor.silent_radius`). Memory of
@@ -344,7 +346,7 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
         # the robots of a chunk in a plain function: numba optimises it better than the
         # body of a parallel loop
         need[chunk, 0], need[chunk, 1] = _control_range(
-            chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, view, trail, mem_f,
+            chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, view, path, mem_f,
             mem_i, held, offsets, motion, t, obs, p, period, sensing_range, a, reach, cap,
             watch_cap, world_i, world_f, sorted_seen, seen_grid, sorted_xy, grid, obs_grid,
             outs)
