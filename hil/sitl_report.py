@@ -154,16 +154,16 @@ def analyse_recording(path: Path, sc: Scenario, killed: Mapping[int, float] | No
                    d_min=finite_or_nan(metrics.geometry_dmin),
                    clearance_min=finite_or_nan(metrics.geometry_clear))
     return data, metrics, {"epoch": epoch, "pose_error": pose_errors,
-                           "truth_gap": truth_gap(samples)}
+                           "truth_gap": truth_gap(samples, sc.duration)}
 
 
-def truth_gap(samples: np.ndarray) -> dict[str, float]:
-    """The longest time [s] between two truth samples of the mission (the plant publishes
-    every 10 ms) and its start ``at`` [s]: a stall of the machine, or its wall clock
-    jumping (a VM paused and resumed), during which the robots stood still while the
-    formation's reference, set on the wall clock, moved on."""
-    if samples.size < 2:
-        return {"seconds": 0.0, "at": 0.0}
-    gaps = np.diff(samples)
+def truth_gap(samples: np.ndarray, duration: float) -> dict[str, float]:
+    """The longest time [s] without a truth sample in the mission [0, duration] (the plant
+    publishes every 10 ms), and its start ``at`` [s]: a stall of the machine, or its wall
+    clock jumping (a VM paused and resumed), during which the robots stood still while the
+    formation's reference, set on the wall clock, moved on. The mission's start and end
+    count as samples: a stall at the end leaves the last truth well before it."""
+    edges = np.concatenate([[0.0], samples, [duration]])
+    gaps = np.diff(edges)
     k = int(np.argmax(gaps))
-    return {"seconds": float(gaps[k]), "at": float(samples[k])}
+    return {"seconds": float(gaps[k]), "at": float(edges[k])}

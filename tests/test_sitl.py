@@ -145,10 +145,13 @@ def agent_stats(p99: float, tails: dict | None, published: int = 100) -> dict:
 def test_a_gap_in_the_truth_is_found_with_its_start():
     from hil.sitl_report import truth_gap
     samples = np.concatenate([np.arange(0.0, 11.2, 0.01), np.arange(19.5, 20.0, 0.01)])
-    gap = truth_gap(samples)
+    gap = truth_gap(samples, 20.0)
     assert gap["seconds"] == pytest.approx(19.5 - samples[1119]) and gap["at"] == samples[1119]
-    assert truth_gap(np.arange(0.0, 5.0, 0.01))["seconds"] == pytest.approx(0.01)
-    assert truth_gap(np.array([1.0])) == {"seconds": 0.0, "at": 0.0}
+    assert truth_gap(np.arange(0.0, 5.0, 0.01), 5.0)["seconds"] == pytest.approx(0.01)
+    # a stall at the end (the clock jumped past it) or before the first sample
+    end = truth_gap(np.arange(0.0, 8.4, 0.01), 9.0)
+    assert end["seconds"] == pytest.approx(0.61) and end["at"] == pytest.approx(8.39)
+    assert truth_gap(np.array([1.0]), 1.5) == {"seconds": 1.0, "at": 0.0}
 
 
 def test_the_worst_agent_and_the_stage_of_its_oldest_data():
