@@ -83,6 +83,24 @@ def corner_takeover(followed: int, side: int, x: float, y: float, obs_x: FloatSe
     return best if best_turn > 0.0 else followed
 
 
+def way_closed(followed: int, side: int, x: float, y: float, obs_x: FloatSeq,
+               obs_y: FloatSeq, obs_r: FloatSeq, b: float, c: float) -> bool:
+    """Whether the way round obstacle F on side s is closed ahead of a robot at (x, y): an
+    obstacle on the other side of its heading (phi_F + s pi/2), ahead of it and within c,
+    leaves less than 2b between itself and F, too narrow to pass outside AVOID."""
+    s = float(side)
+    fx, fy, fr = obs_x[followed], obs_y[followed], obs_r[followed]
+    theta_f = math.atan2(fy - y, fx - x) + side * HALF_PI
+    for k in range(len(obs_r)):
+        off = wrap_angle(math.atan2(obs_y[k] - y, obs_x[k] - x) - theta_f)
+        gx, gy = obs_x[k] - fx, obs_y[k] - fy
+        gap = math.sqrt(gx * gx + gy * gy) - obs_r[k] - fr
+        if (k != followed and s * off > 0.0 and abs(off) < HALF_PI and gap < 2.0 * b
+                and clearance(x, y, obs_x[k], obs_y[k], obs_r[k]) < c):
+            return True
+    return False
+
+
 def remove_toward(dx: float, dy: float, tx: float, ty: float) -> tuple[float, float]:
     """(dx, dy) without its component along the unit vector (tx, ty), if that is positive.
 

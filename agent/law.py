@@ -14,7 +14,9 @@ Every period the robot picks one of three modes:
   reference (the segment passes within b of its surface), or while a circulation side is
   latched. Heading is the obstacle's tangent on the side facing the reference; the side is
   latched until the path is clear of every obstacle within 2c, and a corner rule hands over
-  to a neighbouring obstacle that turns the robot further out. Speed law as in TRACK.
+  to a neighbouring obstacle that turns the robot further out; an obstacle on the other
+  side, less than 2b from the followed one, closes the way and flips the side. Speed law
+  as in TRACK.
 * TRACK (Theorem 1) otherwise: e = p - p_d, theta_d = atan2(-e), u = -K_theta e_theta +
   theta_d_hat_dot, v = K cos(e_theta) min(D_max, |e|).
 
@@ -23,7 +25,9 @@ no faster than w + sqrt(a_brake |e|), w the reference's speed away from the robo
 along -e), so that it arrives instead of overshooting (the paper's K |e| asks for a
 deceleration of K v).
 
-Then |u| is clipped to u_max (|v| <= K D_max holds by construction), the safety governor
+On such a robot the heading loop also turns no faster than lets it stop turning within
+e_theta at half its ramp (docs/controller.md A15). Then |u| is clipped to u_max (|v| <=
+K D_max holds by construction), the safety governor
 (:mod:`agent.governor`) lowers |v| only as far as needed for the robot to stop before every
 hazard, and the command is brought within what the wheel drivers can follow: the wheel speed
 limit (curvature kept) and the ramp from the last command. Nothing after the law clips it.
@@ -47,9 +51,10 @@ from agent.avoidance import (
     remove_toward,
     segment_distance,
     tangent_side,
+    way_closed,
 )
 from agent.config import ControlParams, RobotParams
-from agent.governor import slip_margin, speed_limits, turn_limit
+from agent.governor import braking_speed, slip_margin, speed_limits, turn_limit
 from agent.kinematics import TWO_PI, body_velocity, wheel_command, wrap_angle
 from common.vocabulary import Mode
 
@@ -203,6 +208,8 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         rotate = not avoid and side != 0
         if rotate:
             followed = corner_takeover(followed, side, x, y, obs_x, obs_y, obs_r, p.b, p.c)
+            if way_closed(followed, side, x, y, obs_x, obs_y, obs_r, p.b, p.c):
+                side = -side                    # round the other side of the obstacle
         if side != 0:
             center_x, center_y, radius = obs_x[followed], obs_y[followed], obs_r[followed]
         if rotate:
@@ -273,7 +280,14 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         away = -(ref_vx * ex + ref_vy * ey) / D if D > EPS else 0.0   # m/s, p_d_dot along -e
         speed = max(min(speed, away + math.sqrt(p.accel * D)), 0.0)
     v = math.cos(e_theta) * speed
-    u = min(max(-p.K_theta * e_theta + ff, -p.u_max), p.u_max)
+    turn = -p.K_theta * e_theta
+    if not math.isinf(p.accel):
+        # arrive on the heading, do not overshoot: turn no faster than the robot can stop
+        # turning within e_theta, at half its ramp (each wheel's share accel / 2, so
+        # du/dt = accel / wheel_base) after a period and the drive latency
+        cap = braking_speed(abs(e_theta), p.accel / p.wheel_base, dt + p.latency)
+        turn = min(max(turn, -cap), cap)
+    u = min(max(turn + ff, -p.u_max), p.u_max)
 
     # the safety governor: no faster toward a hazard than lets the robot stop before it
     v_now, u_now = body_velocity(TWO_PI * mem.wheel_r, TWO_PI * mem.wheel_l, p.wheel_radius,

@@ -320,3 +320,58 @@ def test_a_robot_inside_a_disc_that_grew_round_it_still_gets_out():
         mem = out.memory
         pose = arc_step(*pose, out.v[0] * params.period, out.u[0] * params.period)
     assert math.hypot(pose[0] - 20.0, pose[1]) < 0.5, pose
+
+
+
+def _cart():
+    from hil.robot_profile import load_robot_profile
+    return load_robot_profile(str(Path(__file__).resolve().parent.parent / "robots"
+                                  / "cart.toml"))
+
+
+
+@pytest.mark.parametrize("error", [0.6, 1.0, 1.5])
+def test_a_cart_turning_faster_than_it_can_stop_within_its_heading_error_turns_slower(error):
+    """A cart turning at 3 rad/s toward its heading, ``error`` rad away, its reference far
+    ahead on it: its turn rate changes at most at 2a/L = 5 rad/s^2 (the wheels' ramp), so
+    from 3 rad/s it needs 0.9 rad to stop turning, more at half the ramp. The heading loop's
+    K_theta e_theta (1.8-4.5 rad/s) would hold or raise the turn and overshoot; the law turns
+    no faster than lets it stop within e_theta at half the ramp (controller.md A15)."""
+    from lawcase import Case
+
+    from agent.governor import braking_speed
+    from agent.kinematics import body_velocity
+
+    cart, params = _cart(), ControlParams()
+    spin = 3.0 * cart.wheel_base / (2.0 * 2.0 * math.pi * cart.wheel_radius)   # rev/s
+    ref = (100.0 * math.cos(error), 100.0 * math.sin(error))
+    out = step(Case((0.0, 0.0, 0.0), ref, [], [], []), LawMemory(wheel_r=spin, wheel_l=-spin),
+               params, cart)
+    _, u = body_velocity(2.0 * math.pi * out.memory.wheel_r, 2.0 * math.pi * out.memory.wheel_l,
+                         cart.wheel_radius, cart.wheel_base)
+    alpha = cart.a_max / cart.wheel_base                   # rad/s^2, half the ramp's
+    wanted = braking_speed(error, alpha, params.period + cart.drive_latency)
+    change = 2.0 * 2.0 * math.pi * cart.wheel_radius * cart.wheel_ramp * params.period \
+        / cart.wheel_base                                  # rad/s, one period of the ramp
+    assert u == pytest.approx(max(wanted, 3.0 - change), abs=1e-9)
+    assert u < 3.0
+
+def test_a_cart_between_two_obstacles_too_close_to_pass_goes_round_the_other_side():
+    """A cart in the notch between obstacle A (r 2.8 m) and a disc B (r 4.1 m, a dead
+    robot's) 3.45 m apart, less than 2b, with its reference beyond A on B's side: going
+    round A on the side facing the reference leads into the gap, where AVOID pushes it
+    back (a robot of the campaign circled there for 100 s). The way is closed, so the law
+    goes round A on the other side (controller.md A5) and gets away toward its reference."""
+    from lawcase import Case
+
+    from agent.kinematics import arc_step
+
+    cart, params = _cart(), ControlParams()
+    obstacles = [(-9.0, 22.0, 2.79), (-1.6, 14.8, 4.08)]
+    hazards = [(x, y, r + params.a, -math.inf, 0.0) for x, y, r in obstacles]
+    pose, mem = (-7.2, 17.6, math.radians(150.0)), LawMemory()
+    for _ in range(int(20.0 / params.period)):
+        out = step(Case(pose, (41.0, 218.0), [], obstacles, hazards), mem, params, cart)
+        mem = out.memory
+        pose = arc_step(*pose, out.v[0] * params.period, out.u[0] * params.period)
+    assert pose[1] > 30.0, pose                          # beyond A, on the way
