@@ -99,6 +99,7 @@ class SitlRun:
     agent_stats: dict = field(default_factory=dict)
     plant_stats: list = field(default_factory=list)
     recorded: dict = field(default_factory=dict)  # robot id -> states in the recording
+    clock_step: float = 0.0     # s, the wall clock's largest step against the monotonic one
 
 
 def free_tcp_port() -> int:
@@ -348,10 +349,13 @@ def _watch(sc: Scenario, run: SitlRun, children: Children, agents: Mapping[int, 
     last_mission = time.monotonic()
     last_note = 0.0
     kills = sorted((k.at, k.robot) for k in sc.world.kill if k.at <= sc.duration)
+    offset = time.time() - time.monotonic()      # s; moves only if the wall clock steps
     if live:
         live.start()
     try:
         while time.time() < end:
+            run.clock_step = max(run.clock_step,
+                                 abs(time.time() - time.monotonic() - offset))
             due = run.epoch + kills[0][0] if kills else end
             time.sleep(min(0.1, max(due - time.time(), 0.0)))
             while kills and time.time() >= run.epoch + kills[0][0]:

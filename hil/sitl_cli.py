@@ -153,6 +153,12 @@ def run(args: argparse.Namespace, console: Console) -> int:
                       f"VM); the robots stood still while their reference moved on, so this "
                       f"run's convergence and distances say nothing about the swarm; run it "
                       f"again[/yellow]")
+    if s["clock_step"] > CLOCK_STEP_WARN:
+        console.print(f"[yellow]warning: this machine's wall clock stepped by "
+                      f"{s['clock_step']:.2f} s against its monotonic clock during the mission "
+                      f"(NTP, a paused VM): the formation's reference, set on the wall clock, "
+                      f"jumped with it, so this run's convergence says nothing about the "
+                      f"swarm; run it again[/yellow]")
     if s["deadline_misses_in_mission"]:
         console.print(f"[yellow]warning: {s['deadline_misses_in_mission']} control periods "
                       f"missed in the mission: this machine could not run {len(sc.ids)} agents "
@@ -167,6 +173,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
 
 TRUTH_GAP_WARN = 0.25   # s between truth samples (published every 10 ms) worth a warning
+CLOCK_STEP_WARN = 0.1   # s of wall-clock step during a mission worth a warning
 
 
 def describe_world(world: WorldParams) -> str:
@@ -229,6 +236,7 @@ def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> d
     mission_misses = {rid: missed_in(lp, epoch, epoch + duration) for rid, lp in loops.items()}
     return {
         "wall_seconds": round(wall, 2),
+        "clock_step": round(run.clock_step, 3),
         "agents_reporting": len(run.agent_stats),
         "lost_processes": run.lost,
         "killed_at": run.killed,

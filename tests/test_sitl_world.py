@@ -456,9 +456,9 @@ def test_a_killed_robot_counts_for_safety_but_not_for_convergence(tmp_path, monk
 
 
 # --- end to end ------------------------------------------------------------------------
-# wall clock: a stall of a shared machine near the end (metrics' truth_gap) leaves the
-# robots behind a reference that moved on, and the run unconverged
-@pytest.mark.flaky(reruns=1)
+# wall clock: a stall of a shared machine near the end, or its wall clock stepping (metrics'
+# truth_gap, clock_step), leaves the robots behind a reference that moved on, unconverged
+@pytest.mark.flaky(reruns=2)
 def test_sitl_kills_the_planned_agent_and_reports_the_others(tmp_path):
     """A 3-robot SITL with an impaired link, noisy encoders and detections, and robot 2's
     agent killed at 2 s: its process is gone at once, its drivers' watchdog stops its
@@ -489,7 +489,7 @@ def test_sitl_kills_the_planned_agent_and_reports_the_others(tmp_path):
         assert m["world"]["kill"] == [{"robot": 2, "at": 2.0}] and m["world"]["seed"] == 3
         assert "world: link_delay 0.04" in text
         assert m["collisions"] == 0, text
-        assert m["converged"], (s["truth_gap"], text)               # robot 2 not counted
+        assert m["converged"], (s["truth_gap"], s["clock_step"], text)   # 2 not counted
         assert s["watchdog_trips"]["2"] >= 1 and s["watchdog_trips"]["1"] == 0
         assert s["agents_reporting"] == 2                          # no clean exit for robot 2
         # the impaired link: every surviving agent lost states and saw them late
