@@ -73,8 +73,7 @@ def corner_takeover(followed: int, side: int, x: float, y: float, obs_x: FloatSe
     for k in range(len(obs_r)):
         phi = math.atan2(obs_y[k] - y, obs_x[k] - x)
         clear = clearance(x, y, obs_x[k], obs_y[k], obs_r[k])
-        gx, gy = obs_x[k] - fx, obs_y[k] - fy
-        gap = math.sqrt(gx * gx + gy * gy) - obs_r[k] - fr
+        gap = clearance(fx, fy, obs_x[k], obs_y[k], obs_r[k]) - fr     # between surfaces
         near = clear < c or (gap < 2.0 * b and clear < 2.0 * c)
         if k != followed and s * wrap_angle(phi - theta_f) < 0.0 and near:
             turn = s * wrap_angle(phi + s * HALF_PI - theta_f)
@@ -92,11 +91,11 @@ def way_closed(followed: int, side: int, x: float, y: float, obs_x: FloatSeq,
     fx, fy, fr = obs_x[followed], obs_y[followed], obs_r[followed]
     theta_f = math.atan2(fy - y, fx - x) + side * HALF_PI
     for k in range(len(obs_r)):
+        if k == followed or clearance(x, y, obs_x[k], obs_y[k], obs_r[k]) >= c:
+            continue
         off = wrap_angle(math.atan2(obs_y[k] - y, obs_x[k] - x) - theta_f)
-        gx, gy = obs_x[k] - fx, obs_y[k] - fy
-        gap = math.sqrt(gx * gx + gy * gy) - obs_r[k] - fr
-        if (k != followed and s * off > 0.0 and abs(off) < HALF_PI and gap < 2.0 * b
-                and clearance(x, y, obs_x[k], obs_y[k], obs_r[k]) < c):
+        gap = clearance(fx, fy, obs_x[k], obs_y[k], obs_r[k]) - fr     # between surfaces
+        if s * off > 0.0 and abs(off) < HALF_PI and gap < 2.0 * b:
             return True
     return False
 

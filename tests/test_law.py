@@ -257,6 +257,13 @@ def test_track_does_not_sidestep_a_neighbour_beyond_the_reference():
     assert out.mode[0] == Mode.TRACK and out.u[0] == pytest.approx(0.0)
 
 
+def _cart():
+    """The 0.8 m hoverboard cart of robots/cart.toml (3 m/s, 2 m/s^2)."""
+    from hil.robot_profile import load_robot_profile
+    return load_robot_profile(str(Path(__file__).resolve().parent.parent / "robots"
+                                  / "cart.toml"))
+
+
 def _turn_beside_an_obstacle(robot):
     """A cart stopped 2 cm outside the governor's disc of an obstacle ahead (clearance a +
     0.02 m) turns on the spot to a reference on its right, its right wheel slipping 10 %
@@ -285,12 +292,8 @@ def _turn_beside_an_obstacle(robot):
 def test_a_robot_turning_with_slipping_wheels_beside_an_obstacle_keeps_out_of_a():
     """The governor limits the turn to the room left for the drift of slipping wheels
     (controller.md A14), and the robot still turns to its reference."""
-    from hil.robot_profile import load_robot_profile
-
-    cart = load_robot_profile(str(Path(__file__).resolve().parent.parent / "robots"
-                                  / "cart.toml"))
+    worst, turned = _turn_beside_an_obstacle(_cart())
     a = ControlParams().a
-    worst, turned = _turn_beside_an_obstacle(cart)
     assert worst > a and turned > 1.0, (worst, turned)
 
 
@@ -303,11 +306,8 @@ def test_a_robot_inside_a_disc_that_grew_round_it_still_gets_out():
     from lawcase import Case
 
     from agent.kinematics import arc_step
-    from hil.robot_profile import load_robot_profile
 
-    cart = load_robot_profile(str(Path(__file__).resolve().parent.parent / "robots"
-                                  / "cart.toml"))
-    params = ControlParams()
+    cart, params = _cart(), ControlParams()
     a, silent = params.a, 3.0                # m, the silent neighbour's disc
     pose, mem = (0.0, 0.0, 0.0), LawMemory()
     out = step(Case(pose, (20.0, 0.0), [], [(0.0, 2.5, silent - a)],
@@ -322,11 +322,6 @@ def test_a_robot_inside_a_disc_that_grew_round_it_still_gets_out():
     assert math.hypot(pose[0] - 20.0, pose[1]) < 0.5, pose
 
 
-
-def _cart():
-    from hil.robot_profile import load_robot_profile
-    return load_robot_profile(str(Path(__file__).resolve().parent.parent / "robots"
-                                  / "cart.toml"))
 
 
 
