@@ -47,6 +47,7 @@ from agent.settings import AgentSettings, SensingSettings, TimeoutSettings
 from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
 from common.vocabulary import StateFlags
+from hil.host_cpu import cpu_times, steal_share
 from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
@@ -100,6 +101,7 @@ class SitlRun:
     plant_stats: list = field(default_factory=list)
     recorded: dict = field(default_factory=dict)  # robot id -> states in the recording
     clock_step: float = 0.0     # s, the wall clock's largest step against the monotonic one
+    cpu_steal: float | None = None   # share of the CPU the host stole in the mission
 
 
 def free_tcp_port() -> int:
@@ -350,12 +352,15 @@ def _watch(sc: Scenario, run: SitlRun, children: Children, agents: Mapping[int, 
     last_note = 0.0
     kills = sorted((k.at, k.robot) for k in sc.world.kill if k.at <= sc.duration)
     offset = time.time() - time.monotonic()      # s; moves only if the wall clock steps
+    cpu_at_epoch = None
     if live:
         live.start()
     try:
         while time.time() < end:
             run.clock_step = max(run.clock_step,
                                  abs(time.time() - time.monotonic() - offset))
+            if cpu_at_epoch is None and time.time() >= run.epoch:
+                cpu_at_epoch = cpu_times()
             due = run.epoch + kills[0][0] if kills else end
             time.sleep(min(0.1, max(due - time.time(), 0.0)))
             while kills and time.time() >= run.epoch + kills[0][0]:
@@ -384,6 +389,7 @@ def _watch(sc: Scenario, run: SitlRun, children: Children, agents: Mapping[int, 
                 last_note = time.monotonic()
                 console.print(f"t = {t:5.1f} s of {sc.duration:g} s, "
                               f"{len(presence.alive())}/{len(sc.ids)} agents alive")
+        run.cpu_steal = steal_share(cpu_at_epoch, cpu_times())
     finally:
         if live:
             live.stop()

@@ -159,6 +159,11 @@ def run(args: argparse.Namespace, console: Console) -> int:
                       f"(NTP, a paused VM): the formation's reference, set on the wall clock, "
                       f"jumped with it, so this run's convergence says nothing about the "
                       f"swarm; run it again[/yellow]")
+    if (s["cpu_steal"] or 0.0) > CPU_STEAL_WARN:
+        console.print(f"[yellow]warning: this machine's host stole {s['cpu_steal']:.0%} of "
+                      f"its CPU during the mission (a busy virtual machine's host): the "
+                      f"agents ran starved, so this run says more about the host than about "
+                      f"the swarm; run it again when the host is quieter[/yellow]")
     if s["deadline_misses_in_mission"]:
         console.print(f"[yellow]warning: {s['deadline_misses_in_mission']} control periods "
                       f"missed in the mission: this machine could not run {len(sc.ids)} agents "
@@ -174,6 +179,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
 TRUTH_GAP_WARN = 0.25   # s between truth samples (published every 10 ms) worth a warning
 CLOCK_STEP_WARN = 0.1   # s of wall-clock step during a mission worth a warning
+CPU_STEAL_WARN = 0.15   # share of the CPU a VM's host steals during a mission worth a warning
 
 
 def describe_world(world: WorldParams) -> str:
@@ -237,6 +243,7 @@ def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> d
     return {
         "wall_seconds": round(wall, 2),
         "clock_step": round(run.clock_step, 3),
+        "cpu_steal": None if run.cpu_steal is None else round(run.cpu_steal, 3),
         "agents_reporting": len(run.agent_stats),
         "lost_processes": run.lost,
         "killed_at": run.killed,

@@ -1,8 +1,17 @@
-"""Helpers shared by the tests: free loopback ports, simulated time, process checks."""
+"""Helpers shared by the tests: free loopback ports, simulated time, process checks, and
+whether a wall-clock run had the CPU it needed."""
 from __future__ import annotations
 
 import os
 import socket
+
+import pytest
+
+# The share of the CPU a VM's host may steal during a wall-clock swarm run (hil.host_cpu) for
+# the run's liveness (it converges, no failsafe or watchdog trip, few missed periods) to be
+# judged. A swarm of 9 agents with their drivers, world and router needs about 1.6 of this
+# machine's 2 cores; at the 27-63 % steal seen here on 2026-12-03 every agent starves.
+STEAL_LIMIT = 0.15
 
 KINDS = {"tcp": (socket.AF_INET, socket.SOCK_STREAM, "127.0.0.1"),
          "udp": (socket.AF_INET, socket.SOCK_DGRAM, "127.0.0.1"),
@@ -46,3 +55,12 @@ def alive(pid: int) -> bool:
         return done == 0
     except ChildProcessError:              # not our child: it exists, so it runs
         return True
+
+
+def judge_liveness(steal: float | None) -> None:
+    """Call after a wall-clock run's safety assertions, before its liveness ones: an
+    expected failure (xfail, with the steal measured) when the host starved the run, since
+    what follows says nothing about the swarm then."""
+    if steal is not None and steal > STEAL_LIMIT:
+        pytest.xfail(f"the host stole {steal:.0%} of the CPU in the mission (limit "
+                     f"{STEAL_LIMIT:.0%}): safety held; liveness not judged on a starved run")

@@ -26,8 +26,10 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import judge_liveness
 
 from hil.deploy import REALTIME_PRIORITY, deploy, load_manifest
+from hil.host_cpu import cpu_times, steal_share
 from hil.recorder import read_messages
 from hil.scenario import load_scenario
 from hil.sitl_report import analyse_recording, missed_in
@@ -39,7 +41,13 @@ PAPER = ROOT / "scenarios" / "paper.toml"
 FAULT_RUN = 20.0                    # s of mission in the fault tests (recovery time)
 RELAY_PORT = 7448                   # the delaying relay, on the ground station's address
 MISSED_SHARE = 0.05                 # of the mission's periods, per agent (VM stalls)
-LOSS_FELT_MS = 5.0                  # mean uplink delay of a robot whose link loses segments
+# The fault tests' drivers' watchdog [s]. On this shared 2-core VM, with 13 processes of the
+# swarm and a busy host, an agent's loop now and then goes 0.1 s (the default) without a
+# command while its drivers run: their watchdog stops the wheels, the agent's failsafe holds
+# the robot for the rest of the run (as it should on a robot), and the run says nothing of
+# the link fault under test. The governor counts the watchdog in its reaction time.
+FAULT_WATCHDOG = 0.3
+FELT = 2.0                          # a faulty link's p90 delay over a sound one's, at least
 PREFIX = f"bs{os.getpid() % 10000}"
 
 
@@ -57,9 +65,9 @@ def _can_netns() -> str | None:
 
 REASON = _can_netns()
 # 21 processes on this 2-core shared VM, in wall-clock time: a stall of the machine can spoil
-# a run (its failure is reported). On 2026-12-02 the paper swarm across hosts converged in
-# about half its runs on this VM, at the previous landing's commit too (robots trailing
-# their places when a stall ages their data); five failures in a row fail the test
+# a run (its failure is reported); five failures in a row fail the test. A run in which the
+# host stole more than STEAL_LIMIT of the CPU has its safety judged, not its liveness
+# (tests.helpers.judge_liveness)
 pytestmark = [pytest.mark.skipif(REASON is not None, reason=f"multi-host test: {REASON}"),
               pytest.mark.flaky(reruns=4)]
 
@@ -198,11 +206,21 @@ def _sleep_until(wall: float) -> None:
 
 
 def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
-              fault: Loss | Delay | None = None) -> dict:
+              fault: Loss | Delay | None = None, watchdog: float | None = None) -> dict:
     """Deploy and run the swarm across namespaces, with an optional link fault on one
-    robot. Returns the metrics, the agents' and the world's statistics, the drivers'
+    robot. ``watchdog`` [s]: the robots' drivers' watchdog (the scenario's [robot]
+    watchdog_timeout, which the agents' governor counts in its reaction time; None: the
+    scenario's). Returns the metrics, the agents' and the world's statistics, the drivers'
     watchdog trips and when the fault was on."""
-    sc = dataclasses.replace(load_scenario(scenario), duration=duration)
+    sc = load_scenario(scenario)
+    if watchdog is not None:
+        sc = dataclasses.replace(sc, robot=dataclasses.replace(sc.robot,
+                                                               watchdog_timeout=watchdog))
+        scenario = tmp_path / scenario.name
+        scenario.write_text(re.sub(r"\[robot\]\n", f"[robot]\nwatchdog_timeout = {watchdog}\n",
+                                   sc.source.read_text()))
+        assert load_scenario(scenario).robot == sc.robot
+    sc = dataclasses.replace(sc, duration=duration)
     ids = [int(i) for i in sc.ids]
     manifest = tmp_path / "swarm.toml"
     manifest.write_text(
@@ -266,7 +284,8 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
                          str(r), "--swarm", "field", "--zenoh-config", drivers_conf[r],
                          # a robot's drivers are boards of their own: never starved by the
                          # robot computer's loops (SCHED_FIFO at REALTIME_PRIORITY)
-                         "--realtime-priority", str(REALTIME_PRIORITY + 1)], b, logs)
+                         "--realtime-priority", str(REALTIME_PRIORITY + 1),
+                         "--watchdog", str(sc.robot.watchdog_timeout)], b, logs)
             hosts.start(hosts.robot_ns[r], f"agent_{r}",
                         ["agent", "--config", "agent.toml", "--stats",
                          str(logs / f"agent_{r}.json")], b, logs)
@@ -276,6 +295,8 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
                               ground, logs)
         assert mission.wait(timeout=90) == 0, (logs / "mission.log").read_text()
         epoch = float(re.search(r"epoch\s+([0-9.]+)", (logs / "mission.log").read_text())[1])
+        _sleep_until(epoch)
+        cpu_at_epoch = cpu_times()
         if fault is not None:
             _sleep_until(epoch + fault.t_from)
             on = time.time()
@@ -289,6 +310,8 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
             else:
                 _write_atomic(control, "0\n")
             result["fault_on"] = (on - epoch, time.time() - epoch)
+        _sleep_until(epoch + sc.duration)
+        result["cpu_steal"] = steal_share(cpu_at_epoch, cpu_times())
         _sleep_until(epoch + sc.duration + 1)
         result["cpu_share"] = hosts.cpu_share()
         hosts.stop(*(proc for name, proc in hosts.procs if name.startswith("agent")))
@@ -343,6 +366,19 @@ def _write_atomic(path: Path, text: str) -> None:
     tmp.replace(path)
 
 
+def p90_ms(delays: list[float]) -> float:
+    return statistics.quantiles(delays, n=10)[-1]
+
+
+def health(run: dict) -> dict:
+    """What else went wrong in a run: each agent's failsafe and missed periods in the
+    mission, its drivers' watchdog trips, and the CPU share of every process."""
+    return {"cpu_steal": run["cpu_steal"],
+            "failsafe": {r: st["failsafe"] for r, st in run["agents"].items()},
+            "missed": run["missed_in_mission"], "watchdog_trips": run["watchdog_trips"],
+            "cpu_share": run["cpu_share"]}
+
+
 def brief(m: dict) -> dict:
     return {k: m[k] for k in ("convergence_time", "final_max_tracking_error", "stuck_robots",
                               "min_pair_distance", "min_obstacle_clearance", "collisions",
@@ -360,13 +396,16 @@ def test_swarm_across_hosts_with_tls(tmp_path):
     misses = run["missed_in_mission"]
     print("paper across hosts:", brief(m), "deadline misses in the mission:", misses,
           "over the agents' lifetime:", lifetime, "world overruns:", run["world"]["overruns"],
-          "CPU share:", run["cpu_share"])
+          "CPU share:", run["cpu_share"], "steal:", run["cpu_steal"])
     assert m["collisions"] == 0 and m["min_pair_distance"] > a, brief(m)
     assert m["min_obstacle_clearance"] > a, brief(m)
-    assert m["converged"] and m["convergence_time"] <= 12.0, brief(m)
     assert len(agents) == 9 and sorted(misses) == sorted(agents)
     for stats in agents.values():
-        assert stats["failsafe"] is None and stats["agent"]["neighbour_age_ms"]["count"] > 0
+        assert stats["agent"]["neighbour_age_ms"]["count"] > 0
+    judge_liveness(run["cpu_steal"])
+    assert m["converged"] and m["convergence_time"] <= 12.0, brief(m)
+    for stats in agents.values():
+        assert stats["failsafe"] is None
     assert sum(run["watchdog_trips"].values()) == 0, run["watchdog_trips"]
     # The deployed agents' loops run SCHED_FIFO (realtime_priority in their bundles), so 21
     # processes on 2 cores do not delay them: most runs miss no period in the mission. This
@@ -382,22 +421,25 @@ def test_swarm_across_hosts_with_tls(tmp_path):
 def test_link_fault_on_one_robot(tmp_path):
     """30 % loss on robot 2's link for 4 s early in the run: no distance below a, and the
     swarm converges once the link recovers."""
-    run = run_swarm(tmp_path, fault=Loss(2, 30, 0.5, 4.5), duration=FAULT_RUN)
+    run = run_swarm(tmp_path, fault=Loss(2, 30, 0.5, 4.5), duration=FAULT_RUN,
+                    watchdog=FAULT_WATCHDOG)
     m = run["metrics"]
     print("loss fault on", run["fault_on"], brief(m), "ages:",
-          {r: st["agent"]["neighbour_age_ms"] for r, st in run["agents"].items()})
+          {r: st["agent"]["neighbour_age_ms"] for r, st in run["agents"].items()},
+          health(run))
     assert m["collisions"] == 0 and m["min_pair_distance"] > run["a"], brief(m)
+    judge_liveness(run["cpu_steal"])
+    assert not any(st["failsafe"] for st in run["agents"].values()), health(run)
     assert m["converged"], brief(m)
     # the fault was felt: robot 2's states reached the ground late while its link lost
-    # segments (TCP retransmissions), as they never do on a sound link (mean 2 ms; a stall
-    # of the VM adds about 1 ms to a 4 s window), and on time again once it healed; the
-    # sound links of robots 1 and 3 in the same window are the fault-free control
+    # segments (TCP retransmissions), and on time again once it healed; the sound links of
+    # robots 1 and 3 in the same window are the fault-free control. p90s, as ratios: the
+    # machine's load moves every link's delay (a sound link's p90 is 2 ms on a quiet VM,
+    # up to 19 ms beside two more swarms; the lossy one's 22-52 ms)
     on, off = run["fault_on"]
-    mean = {r: statistics.fmean(window(run["uplink_ms"][r], on + 0.1, off - 0.1))
-            for r in (1, 2, 3)}
-    healed = statistics.fmean(window(run["uplink_ms"][2], off + 2.0, FAULT_RUN))
-    assert mean[2] > max(LOSS_FELT_MS, 3 * healed), (mean, healed)
-    assert mean[1] < LOSS_FELT_MS and mean[3] < LOSS_FELT_MS, mean
+    p90 = {r: p90_ms(window(run["uplink_ms"][r], on + 0.1, off - 0.1)) for r in (1, 2, 3)}
+    healed = p90_ms(window(run["uplink_ms"][2], off + 2.0, FAULT_RUN))
+    assert p90[2] > FELT * max(p90[1], p90[3], healed), (p90, healed)
 
 
 def test_link_delay_on_one_robot(tmp_path):
@@ -405,15 +447,15 @@ def test_link_delay_on_one_robot(tmp_path):
     in the run, then none: no distance below a, and the swarm converges once the link
     recovers."""
     delay = Delay(2, 300.0, 0.5, 4.5)
-    run = run_swarm(tmp_path, fault=delay, duration=FAULT_RUN)
+    run = run_swarm(tmp_path, fault=delay, duration=FAULT_RUN, watchdog=FAULT_WATCHDOG)
     m, agents = run["metrics"], run["agents"]
     ages = {r: st["agent"]["neighbour_age_ms"] for r, st in agents.items()}
     print("delay fault on", run["fault_on"], brief(m), "ages:", ages, "relayed connections:",
-          run["relay_connections"])
+          run["relay_connections"], health(run))
     assert m["collisions"] == 0 and m["min_pair_distance"] > run["a"], brief(m)
+    judge_liveness(run["cpu_steal"])
+    assert not any(st["failsafe"] for st in agents.values()), health(run)
     assert m["converged"], brief(m)
-    for stats in agents.values():
-        assert stats["failsafe"] is None
     # the fault was felt: robot 2's states reached the ground and its neighbours late, theirs
     # reached it late (fault-free, the neighbour-state age p99 is 16-21 ms)
     on, off = run["fault_on"]

@@ -16,7 +16,7 @@ from types import MappingProxyType
 
 import numpy as np
 import pytest
-from helpers import SimClock, alive
+from helpers import SimClock, alive, judge_liveness
 
 from agent.config import RobotParams
 from agent.impairment import ImpairedSwarm, ImpairmentSettings
@@ -489,8 +489,7 @@ def test_sitl_kills_the_planned_agent_and_reports_the_others(tmp_path):
         assert m["world"]["kill"] == [{"robot": 2, "at": 2.0}] and m["world"]["seed"] == 3
         assert "world: link_delay 0.04" in text
         assert m["collisions"] == 0, text
-        assert m["converged"], (s["truth_gap"], s["clock_step"], text)   # 2 not counted
-        assert s["watchdog_trips"]["2"] >= 1 and s["watchdog_trips"]["1"] == 0
+        assert s["watchdog_trips"]["2"] >= 1
         assert s["agents_reporting"] == 2                          # no clean exit for robot 2
         # the impaired link: every surviving agent lost states and saw them late
         for rid in ("1", "3"):
@@ -506,6 +505,9 @@ def test_sitl_kills_the_planned_agent_and_reports_the_others(tmp_path):
         assert np.ptp(still[:, 2]) < 0.01 and np.ptp(still[:, 3]) < 0.01
         assert np.ptp(moving[:, 2]) > 2.0
         assert not [p for p in pids() if alive(p)], "processes left running"
+        judge_liveness(s["cpu_steal"])
+        assert m["converged"], (s["truth_gap"], s["clock_step"], text)   # 2 not counted
+        assert s["watchdog_trips"]["1"] == 0 and s["watchdog_trips"]["3"] == 0
     finally:
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
