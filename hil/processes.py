@@ -8,6 +8,7 @@ launcher fails.
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import signal
@@ -100,9 +101,27 @@ class Children:
                     log.warning("%s (pid %d) ignored %s", child.name, child.pid, sig.name)
 
     def terminate_all(self, grace: float = 3.0) -> None:
-        """End every child, newest first (agents before the plant that serves them)."""
-        for child in reversed(self.children):
-            self.terminate(child, grace)
+        """End every child, newest first (agents before the plant that serves them). An
+        interrupt or error meanwhile (a second Ctrl-C) kills every child left at once,
+        then goes on: no child outlives the launcher."""
+        try:
+            for child in reversed(self.children):
+                self.terminate(child, grace)
+        except BaseException:
+            self.kill_all()
+            raise
+
+    def kill_all(self, wait: float = 5.0) -> None:
+        """SIGKILL to every child still running, then reap them (``wait`` s at most)."""
+        running = [c for c in self.children if c.proc.poll() is None]
+        for child in running:
+            child.expected_exit = True
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(child.proc.pid, signal.SIGKILL)
+        end = time.monotonic() + wait
+        for child in running:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                child.proc.wait(timeout=max(end - time.monotonic(), 0.0))
 
     def __enter__(self) -> "Children":
         return self

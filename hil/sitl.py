@@ -268,10 +268,12 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             run.plant_stats.append(json.loads(path.read_text()))
         return run
     finally:
-        for thing in reversed(opened):
-            thing.close()
-        router.close()
-        router_child.terminate_all()
+        try:              # a session that fails to close must not leave the router running
+            for thing in reversed(opened):
+                thing.close()
+            router.close()
+        finally:
+            router_child.terminate_all()
 
 
 def _failure(what: str, children: Children) -> str:

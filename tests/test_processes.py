@@ -31,3 +31,43 @@ def test_children_ended_together_wait_one_grace_period_not_one_each(tmp_path):
                 child.proc.kill()
             child.proc.wait()
             child.proc.stdout.close()
+
+
+def test_an_interrupt_while_ending_the_children_kills_every_one_left(tmp_path, monkeypatch):
+    """A second Ctrl-C (or any error) while the launcher ends its children one by one: the
+    ones not yet ended get SIGKILL at once, and the interrupt goes on."""
+    children = Children(tmp_path)
+    for k in range(3):
+        proc = subprocess.Popen([sys.executable, "-c", STUBBORN], stdout=subprocess.PIPE,
+                                start_new_session=True, text=True)
+        children.children.append(Child(f"stubborn_{k}", proc, tmp_path / f"{k}.log"))
+    ended = []
+
+    def interrupted(child, grace=3.0):
+        if ended:
+            raise KeyboardInterrupt
+        ended.append(child.name)
+        child.expected_exit = True
+        child.proc.terminate()
+        child.proc.wait()
+
+    monkeypatch.setattr(children, "terminate", interrupted)
+    try:
+        for child in children.children:
+            assert child.proc.stdout.readline().strip() == "ready"
+        try:
+            children.terminate_all()
+            raise AssertionError("the interrupt was swallowed")
+        except KeyboardInterrupt:
+            pass
+        assert ended == ["stubborn_2"]                              # newest first
+        assert [c.proc.poll() for c in children.children] == [-signal.SIGKILL,
+                                                              -signal.SIGKILL,
+                                                              -signal.SIGTERM]
+        assert not children.failed()
+    finally:
+        for child in children.children:
+            if child.proc.poll() is None:
+                child.proc.kill()
+            child.proc.wait()
+            child.proc.stdout.close()
