@@ -230,7 +230,10 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             console.print(f"plant starting ({len(ids)} robots) ...")
             if not wait_until(lambda: set(truth.snapshot()) >= ids or children.failed(),
                               opts.startup_timeout) or children.failed():
-                raise SitlError(_failure("the plant did not come up", children))
+                raise SitlError(_failure(
+                    f"the plant did not come up within {opts.startup_timeout:g} s "
+                    f"(--startup-timeout): no truth from robot(s) "
+                    f"{_ids(ids - set(truth.snapshot()))}", children))
             agents = {}
             for s in settings:
                 agents[s.robot_id] = children.start(
@@ -242,7 +245,11 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             console.print(f"{len(agents)} agents starting ...")
             if not wait_until(lambda: presence.alive() >= ids or children.failed(),
                               opts.startup_timeout) or children.failed():
-                raise SitlError(_failure("not every agent came up", children))
+                missing = ids - presence.alive()
+                raise SitlError(_failure(
+                    f"not every agent came up within {opts.startup_timeout:g} s "
+                    f"(--startup-timeout; {len(ids) - len(missing)} of {len(ids)} did): "
+                    f"not up: robot(s) {_ids(missing)}", children))
 
             run.epoch = time.time() + opts.lead_time
             mission = MissionMsg(1, time.time(), run.epoch, sc.formation.center0,
@@ -274,6 +281,10 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             router.close()
         finally:
             router_child.terminate_all()
+
+
+def _ids(robots: set[int]) -> str:
+    return ", ".join(map(str, sorted(robots)))
 
 
 def _failure(what: str, children: Children) -> str:

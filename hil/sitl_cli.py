@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 
-from hil.cli_options import Subparsers, add_can_options, priority
+from hil.cli_options import Subparsers, add_can_options, positive, priority
 from hil.console import summary_table
 from hil.exit_codes import EXIT_LOST, EXIT_NOT_RUN, EXIT_OK, EXIT_UNSAFE, BadInput
 
@@ -43,6 +43,9 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--realtime-priority", type=priority, default=10, metavar="P",
                    help="agents' control loops run SCHED_FIFO at priority P (1..99; needs "
                         "root or RLIMIT_RTPRIO, else a warning; 0: normal scheduling)")
+    p.add_argument("--startup-timeout", type=positive, default=40.0, metavar="S",
+                   help="seconds for the plant, then for every agent, to come up (a loaded "
+                        "machine starts dozens of Python processes slowly)")
     p.add_argument("--near-radius", type=float, default=0.0, metavar="M",
                    help="agents take full-rate states only from robots within M metres "
                         "and 5 Hz beacons from the rest (0: every robot at full rate)")
@@ -105,6 +108,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
                        gcs_port=args.gcs_port, near_radius=args.near_radius,
                        mavlink_key=_mavlink_key(args.mavlink_key),
                        realtime_priority=args.realtime_priority,
+                       startup_timeout=args.startup_timeout,
                        robot_profile=str(Path(profile).resolve()) if profile else None)
     if problem := near_radius_problem(opts.near_radius, sc.sensing_range):
         raise BadInput(f"--near-radius {problem}")
