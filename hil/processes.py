@@ -127,7 +127,14 @@ class Children:
         return self
 
     def __exit__(self, *exc) -> None:
-        self.terminate_all()
+        """Every child still running ends together, newest first (an error or Ctrl-C while
+        dozens start up must not wait a grace period for each); a second interrupt
+        meanwhile kills them."""
+        try:
+            self.terminate_together(list(reversed(self.children)))
+        except BaseException:
+            self.kill_all()
+            raise
 
 
 def wait_until(predicate, timeout: float, poll: float = 0.05) -> bool:

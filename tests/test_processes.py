@@ -61,3 +61,14 @@ def test_an_interrupt_while_ending_the_children_kills_every_one_left(stubborn, m
     assert [c.proc.poll() for c in stubborn.children] == [-signal.SIGKILL, -signal.SIGKILL,
                                                           -signal.SIGTERM]
     assert not stubborn.failed()
+
+
+def test_leaving_the_block_ends_the_children_together(stubborn):
+    """An error (or Ctrl-C) out of ``with Children``: every child gets SIGINT at once, then
+    SIGTERM one grace period later, not a grace period each."""
+    started = time.monotonic()
+    with pytest.raises(RuntimeError), stubborn:
+        raise RuntimeError("start-up failed")
+    elapsed = time.monotonic() - started
+    assert [c.proc.returncode for c in stubborn.children] == [-signal.SIGTERM] * 3
+    assert elapsed < 6.0, elapsed              # one after another: 9 s and more
