@@ -23,10 +23,14 @@ def test_udp_multicast_hears_peers_but_not_itself():
     tool = can.Bus(interface="udp_multicast", channel="ff11::b5:9", port=port, hop_limit=0)
     try:
         assert isinstance(a, EchoFilteredBus)
+        sent_at = time.time()
         a.send(can.Message(arbitration_id=0x02D, data=bytes(8), is_extended_id=False))
         got = b.recv(2.0)
         assert got is not None and got.arbitration_id == 0x02D
+        assert sent_at - 0.5 < got.timestamp < time.time() + 0.5   # the kernel's receive time
+        waited = time.monotonic()
         assert a.recv(0.3) is None                  # its own frame never reaches it
+        assert time.monotonic() - waited >= 0.29    # and it waited for the timeout
         got = tool.recv(2.0)
         assert got is not None and got.arbitration_id == 0x02D
         tool.send(can.Message(arbitration_id=0x029, data=bytes(8), is_extended_id=False))

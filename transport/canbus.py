@@ -13,12 +13,14 @@ from __future__ import annotations
 import ctypes
 import ipaddress
 import os
+import select
 import socket
 import struct
 import time
 
 import can
 from can.interfaces.udp_multicast import UdpMulticastBus
+from can.interfaces.udp_multicast.bus import SO_TIMESTAMPNS
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 DEFAULT_GROUP = "ff11::b5:1"     # interface-local scope: never routed off the host
@@ -63,6 +65,18 @@ def drop_from_port(sock: socket.socket, port: int) -> None:
                    (_BPF_RET_K, 0, 0, 0xFFFFFFFF)])   # keep the whole datagram
 
 
+_TIMESPEC = struct.Struct("@ll")
+
+
+def _stamp(ancillary: list) -> float:
+    """The kernel's receive time (SO_TIMESTAMPNS) of a datagram [s, UNIX time], or now."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= _TIMESPEC.size:
+            seconds, nanoseconds = _TIMESPEC.unpack_from(data)
+            return seconds + nanoseconds * 1e-9
+    return time.time()
+
+
 class EchoFilteredBus(can.BusABC):
     """A python-can ``udp_multicast`` bus that never hears its own frames, like a CAN
     controller.
@@ -78,7 +92,7 @@ class EchoFilteredBus(can.BusABC):
 
     def __init__(self, inner: UdpMulticastBus):
         self.inner = inner
-        self._socket = rx = inner._multicast     # python-can's receiving side of this bus
+        rx = inner._multicast                    # python-can's receiving side of this bus
         self._dest = (rx.group, rx.port)
         self._tx = tx = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
         try:
@@ -96,6 +110,9 @@ class EchoFilteredBus(can.BusABC):
         except OSError:
             self._tx.close()
             raise
+        self._sock = rx._socket
+        self._size = rx.max_buffer
+        self._ancillary_size = rx.received_ancillary_buffer_size   # 0: no SO_TIMESTAMPNS
         self.malformed = 0
         super().__init__(channel=inner.channel_info)
         self.channel_info = inner.channel_info
@@ -109,15 +126,30 @@ class EchoFilteredBus(can.BusABC):
             raise can.CanOperationError(f"failed to send via socket: {exc}") from exc
 
     def _recv_internal(self, timeout: float | None):
+        # python-can's recv selects before every read: two system calls a frame, and one to
+        # find the socket empty. Here a datagram waiting is read at once (MSG_DONTWAIT), and
+        # only an empty socket is waited on, for what is left of ``timeout``.
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
-            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
-            got = self._socket.recv(remaining)      # raises CanOperationError if the socket fails
-            if not got:
-                return None, False
-            data, _, timestamp = got
             try:
-                msg = unpack_message(data, replace={"timestamp": timestamp}, check=True)
+                data, ancillary, _, _ = self._sock.recvmsg(self._size, self._ancillary_size,
+                                                           socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                remaining = None if deadline is None else deadline - time.monotonic()
+                if remaining is not None and remaining <= 0.0:
+                    return None, False
+                try:
+                    ready, _, _ = select.select([self._sock], [], [], remaining)
+                except OSError as exc:
+                    raise can.CanOperationError(f"failed to wait on the socket: {exc}") from exc
+                if not ready:
+                    return None, False
+                continue
+            except OSError as exc:
+                raise can.CanOperationError(f"failed to receive via socket: {exc}") from exc
+            try:
+                msg = unpack_message(data, replace={"timestamp": _stamp(ancillary)},
+                                     check=True)
             except Exception:                  # msgpack or python-can: not a frame of ours
                 msg = None
             if msg is None or msg.is_fd:

@@ -56,7 +56,9 @@ def database() -> cantools.database.can.Database:
     return db
 
 
+@lru_cache(maxsize=None)
 def _layout(cmd: Cmd) -> cantools.database.can.Message:
+    """``cmd``'s message in the DBC (looked up once: this runs for every frame)."""
     return database().get_message_by_frame_id(int(cmd))
 
 
