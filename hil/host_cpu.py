@@ -1,11 +1,17 @@
-"""How much CPU this machine really had over a stretch of time: the share its hypervisor
-stole.
+"""How much CPU this machine really had over a stretch of time, and how much of it was used:
+the share its hypervisor stole, the share busy, and the kernel's cap on real-time processes.
 
 A virtual machine's CPUs run only when the host schedules them; the time they were ready but
 not run is *steal* (``/proc/stat``, the 8th field of the ``cpu`` line). A SITL swarm runs in
 wall-clock time, so a host that steals a third of the CPU starves its agents exactly as a
 too-small robot computer would: late periods, old neighbour data, robots that brake. Runs
 under heavy steal say more about the host than about the swarm.
+
+A swarm that needs more CPU than the machine has misses periods however it is scheduled.
+Its loops run under SCHED_FIFO, and Linux lets real-time processes use only
+``sched_rt_runtime_us`` of every ``sched_rt_period_us`` (95 % of each second by default):
+beyond that the kernel stops every real-time process together for the rest of the second,
+so a saturated swarm misses periods in all its agents at once, once a second.
 """
 from __future__ import annotations
 
@@ -13,6 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 PROC_STAT = Path("/proc/stat")
+RT_RUNTIME = Path("/proc/sys/kernel/sched_rt_runtime_us")
+RT_PERIOD = Path("/proc/sys/kernel/sched_rt_period_us")
 
 
 @dataclass(frozen=True)
@@ -21,6 +29,7 @@ class CpuTimes:
 
     total: int
     steal: int
+    idle: int = 0        # idle and waiting for I/O
 
 
 def cpu_times(stat: Path = PROC_STAT) -> CpuTimes | None:
@@ -34,7 +43,7 @@ def cpu_times(stat: Path = PROC_STAT) -> CpuTimes | None:
     if fields[0] != "cpu" or len(fields) < 9:
         return None
     ticks = [int(x) for x in fields[1:9]]     # user nice system idle iowait irq softirq steal
-    return CpuTimes(total=sum(ticks), steal=ticks[7])
+    return CpuTimes(total=sum(ticks), steal=ticks[7], idle=ticks[3] + ticks[4])
 
 
 def steal_share(before: CpuTimes | None, after: CpuTimes | None) -> float | None:
@@ -43,3 +52,26 @@ def steal_share(before: CpuTimes | None, after: CpuTimes | None) -> float | None
     if before is None or after is None or after.total <= before.total:
         return None
     return (after.steal - before.steal) / (after.total - before.total)
+
+
+def busy_share(before: CpuTimes | None, after: CpuTimes | None) -> float | None:
+    """The share (0-1) of the CPU time the host gave between two readings that was used (not
+    idle): 1 is a saturated machine. None as :func:`steal_share`."""
+    if before is None or after is None:
+        return None
+    given = (after.total - before.total) - (after.steal - before.steal)
+    if given <= 0:
+        return None
+    return 1.0 - (after.idle - before.idle) / given
+
+
+def rt_limit(runtime: Path = RT_RUNTIME, period: Path = RT_PERIOD) -> float | None:
+    """The share (0-1) of each CPU that real-time processes may use together; None when the
+    kernel does not cap them (``sched_rt_runtime_us`` = -1) or does not say."""
+    try:
+        run_us, period_us = int(runtime.read_text()), int(period.read_text())
+    except (OSError, ValueError):
+        return None
+    if run_us < 0 or period_us <= 0:
+        return None
+    return run_us / period_us

@@ -47,7 +47,7 @@ from agent.settings import AgentSettings, SensingSettings, TimeoutSettings
 from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
 from common.vocabulary import StateFlags
-from hil.host_cpu import cpu_times, steal_share
+from hil.host_cpu import busy_share, cpu_times, steal_share
 from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
@@ -102,6 +102,7 @@ class SitlRun:
     recorded: dict = field(default_factory=dict)  # robot id -> states in the recording
     clock_step: float = 0.0     # s, the wall clock's largest step against the monotonic one
     cpu_steal: float | None = None   # share of the CPU the host stole in the mission
+    cpu_busy: float | None = None    # share of the CPU the host gave that was used then
 
 
 def free_tcp_port() -> int:
@@ -402,7 +403,9 @@ def _watch(sc: Scenario, run: SitlRun, children: Children, agents: Mapping[int, 
                 last_note = time.monotonic()
                 console.print(f"t = {t:5.1f} s of {sc.duration:g} s, "
                               f"{len(presence.alive())}/{len(sc.ids)} agents alive")
-        run.cpu_steal = steal_share(cpu_at_epoch, cpu_times())
+        cpu_at_end = cpu_times()
+        run.cpu_steal = steal_share(cpu_at_epoch, cpu_at_end)
+        run.cpu_busy = busy_share(cpu_at_epoch, cpu_at_end)
     finally:
         if live:
             live.stop()

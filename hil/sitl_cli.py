@@ -13,6 +13,7 @@ from rich.console import Console
 from hil.cli_options import Subparsers, add_can_options, positive, priority
 from hil.console import summary_table
 from hil.exit_codes import EXIT_LOST, EXIT_NOT_RUN, EXIT_OK, EXIT_UNSAFE, BadInput
+from hil.host_cpu import rt_limit
 
 if TYPE_CHECKING:
     from firmware_sim.world import WorldParams
@@ -171,9 +172,9 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if s["deadline_misses_in_mission"]:
         console.print(f"[yellow]warning: {s['deadline_misses_in_mission']} control periods "
                       f"missed in the mission: this machine could not run {len(sc.ids)} agents "
-                      f"in real time; late periods and stale neighbour data eat the braking "
-                      f"margin, so the safety of this run is not representative (fewer "
-                      f"robots, or more cores)[/yellow]")
+                      f"in real time{saturation(s['cpu_busy'])}; late periods and stale "
+                      f"neighbour data eat the braking margin, so the safety of this run is "
+                      f"not representative (fewer robots, or more cores)[/yellow]")
     console.print(f"metrics: {out / run_folder.METRICS}\nfigures: {out / run_folder.FIGURES}/"
                   f"\nrecording: {out / 'run.mcap'} (Foxglove, mcap tools)")
     if metrics["collisions"]:
@@ -184,6 +185,20 @@ def run(args: argparse.Namespace, console: Console) -> int:
 TRUTH_GAP_WARN = 0.25   # s between truth samples (published every 10 ms) worth a warning
 CLOCK_STEP_WARN = 0.1   # s of wall-clock step during a mission worth a warning
 CPU_STEAL_WARN = 0.15   # share of the CPU a VM's host steals during a mission worth a warning
+
+
+SATURATED = 0.9        # share of the CPU busy in a mission at which the machine had no room
+
+
+def saturation(busy: float | None) -> str:
+    """Why periods were missed, when the machine was saturated: a clause for the warning."""
+    if busy is None or busy < SATURATED:
+        return ""
+    limit = rt_limit()
+    cap = (f"; real-time loops may use {limit:.0%} of each second "
+           f"(/proc/sys/kernel/sched_rt_runtime_us), beyond which the kernel stalls them all "
+           f"together once a second") if limit is not None else ""
+    return f" (its CPUs were {busy:.0%} busy in the mission{cap})"
 
 
 def describe_world(world: WorldParams) -> str:
@@ -248,6 +263,7 @@ def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> d
         "wall_seconds": round(wall, 2),
         "clock_step": round(run.clock_step, 3),
         "cpu_steal": None if run.cpu_steal is None else round(run.cpu_steal, 3),
+        "cpu_busy": None if run.cpu_busy is None else round(run.cpu_busy, 3),
         "agents_reporting": len(run.agent_stats),
         "lost_processes": run.lost,
         "killed_at": run.killed,

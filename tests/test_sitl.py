@@ -92,6 +92,7 @@ def test_sitl_paper_scenario(launch):
     s = m["sitl"]
     assert s["lost_processes"] == {} and s["agents_reporting"] == 9
     assert 0.0 <= s["cpu_steal"] <= 1.0, s["cpu_steal"]        # the host's, in the mission
+    assert 0.0 < s["cpu_busy"] <= 1.0, s["cpu_busy"]           # a swarm ran: never idle
     # the router ran in a process of its own; each agent's neighbour-state age is split
     # into stages (router timestamps)
     assert run.manifest()["router_pid"]
