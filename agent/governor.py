@@ -42,7 +42,8 @@ MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nea
 
 def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: float,
                      accel: float, top_speed: float, staleness: float, stop_time: float,
-                     wheel_top: float = math.inf) -> tuple[float, float]:
+                     wheel_top: float = math.inf, nearer: float = math.inf
+                     ) -> tuple[float, float]:
     """(full, half): the exclusion radii [m] around a neighbour's reported position, last
     reported moving at ``speed`` [m/s] and turning with its wheels ``turn`` [m/s] apart
     (half the difference of their ground speeds: |u| times half the wheel base) ``age`` [s]
@@ -51,7 +52,9 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
     ``accel`` [m/s^2] and ``top_speed`` [m/s] bound how its speed can have changed since,
     ``wheel_top`` [m/s] each wheel's ground speed (so the wheels are at most
     wheel_top - speed apart); ``stop_time`` [s] is how long a dead agent's drivers keep
-    going before they brake (watchdog and drive latency).
+    going before they brake (watchdog and drive latency). ``nearer`` [m]: how much nearer
+    to this robot than its reported position it can be by now, when known from where it
+    was heading (:func:`approach`); heard from, its disc grows by no more than that.
 
     Heard from (age <= staleness): half of the gap beyond a, its travel since the stamp and
     this robot's trail. When it last acted, at its stamp or as late as it lived after it,
@@ -68,7 +71,7 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
     if not math.isinf(accel):
         grow = min(grow, speed * age + 0.5 * accel * age * age)
     if not silent:
-        return -math.inf, a + grow + trail
+        return -math.inf, a + min(grow, nearer) + trail
     now, turn_now = top_speed, turn
     if not math.isinf(accel):
         now = min(now, speed + accel * age)
@@ -76,6 +79,34 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
         # stop is at the fastest speed, the wheels as far apart as that leaves them
         turn_now = min(turn + accel * age, max(wheel_top - now, 0.0))
     return a + grow + stopping(now, accel, stop_time, turn_now), -math.inf
+
+
+def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
+             age: float, accel: float, half_base: float) -> float:
+    """How much nearer [m] a neighbour can be by now to a point (``rel_x``, ``rel_y``) [m]
+    from its reported position than that position is, having reported moving at ``speed``
+    [m/s] (signed, along ``heading`` [rad]) and turning at ``turn_rate`` [rad/s] ``age``
+    [s] ago, each wheel's ground speed changing by at most ``accel`` [m/s^2], the wheels
+    2 ``half_base`` [m] apart (inf: no bound, on wheels that change speed at once).
+
+    Since its stamp it has been within rho of the segment from its reported position to
+    where its report extrapolates to now: its speed differs from the reported one by at most
+    accel t, and its heading from the reported one by at most |u| t + accel t^2 / (2
+    half_base) (its turn rate changes at most accel / half_base), so after t it is off the
+    straight line by at most accel t^2 / 2 + |v| (|u| t^2 / 2 + accel t^3 / (6 half_base))
+    (docs/controller.md, A10). The point's distance to that segment, less rho, bounds its
+    distance to the neighbour at any time since the stamp: a neighbour driving away is not
+    counted as if it could have turned back at once."""
+    if math.isinf(accel) or half_base <= 0.0:
+        return math.inf
+    age = max(age, 0.0)
+    ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
+    length2 = ex * ex + ey * ey
+    t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
+    off = math.sqrt((rel_x - t * ex) ** 2 + (rel_y - t * ey) ** 2)
+    rho = 0.5 * accel * age * age + abs(speed) * (
+        0.5 * abs(turn_rate) * age * age + accel * age * age * age / (6.0 * half_base))
+    return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho
 
 
 def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: float,

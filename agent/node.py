@@ -28,7 +28,7 @@ import numpy as np
 
 from agent.config import CONTROL_PARAMS
 from agent.formation import Formation
-from agent.governor import neighbour_hazard, silent_radius
+from agent.governor import approach, neighbour_hazard, silent_radius
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step, moved_estimate, pair_active
 from agent.loop import Clock
@@ -436,8 +436,9 @@ class Agent:
             if rid == me or dx * dx + dy * dy > reach * reach:
                 continue
             age = now_w - m.stamp
+            nearer = approach(-dx, -dy, m.theta, m.v, m.u, age, disc[1], half_base)
             full, half = neighbour_hazard(m.v, half_base * m.u, age,
-                                          self.trail.since(m.stamp), *disc)
+                                          self.trail.since(m.stamp), *disc, nearer)
             hx.append(m.x)
             hy.append(m.y)
             hr.append(full + grow)

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from agent.formation import reference_point
-from agent.governor import neighbour_hazard, silent_radius
+from agent.governor import approach, neighbour_hazard, silent_radius
 from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step, pair_active
 from firmware_sim.world_step import FRESH, NONE, STALE, detect
@@ -199,10 +199,12 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             # this robot's path since the stamp: from the period at or before it
             ago = min(max(int(math.ceil(age / period - 1e-9)), 0), ring - 1)
             trail = path[step % ring, i] - path[(step - ago) % ring, i]
+            nearer = approach(x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3],
+                              view[j, 4], age, p.accel, 0.5 * p.wheel_base)
             h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3],
                                                   0.5 * view[j, 4] * p.wheel_base, age,
                                                   trail, a, p.accel, top_speed, staleness,
-                                                  stop_time, wheel_top)
+                                                  stop_time, wheel_top, nearer)
             h_r[n_h] += grow
             h_h[n_h] += grow
             h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness

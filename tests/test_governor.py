@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.governor import (
+    approach,
     braking_speed,
     neighbour_hazard,
     silent_radius,
@@ -64,6 +65,53 @@ def test_sharing_with_old_data_keeps_two_stops_apart_should_the_neighbour_die(pt
         return
     # each stop ends anywhere in its bound: the worst, both on the line between them
     assert dist(p, q) - own - theirs >= A - 1e-9
+
+
+@settings(max_examples=300, deadline=None)
+@given(v=st.floats(-3.0, 3.0), u=st.floats(-4.0, 4.0), accel=st.floats(0.5, 25.0),
+       base=st.floats(0.2, 0.8), age=st.floats(0.0, 0.6),
+       point=st.tuples(st.floats(-2.0, 6.0), st.floats(-2.0, 2.0)),
+       wheel_acc=st.lists(st.tuples(st.sampled_from([-1.0, 0.0, 1.0]),
+                                    st.sampled_from([-1.0, 0.0, 1.0])),
+                          min_size=6, max_size=6))
+def test_a_neighbour_is_never_nearer_than_its_heading_allows(v, u, accel, base, age, point,
+                                                             wheel_acc):
+    """A neighbour reported at the origin, heading along x at v and turning at u, drives on
+    for ``age`` with each wheel's ground speed changing at up to ``accel`` (piecewise
+    constant, any sign, in six stretches): at every instant its distance to ``point`` is at
+    least the distance from the origin less :func:`approach`, and :func:`approach` never
+    grants more than a disc centred on the origin would."""
+    half = 0.5 * base
+    nearer = approach(point[0], point[1], 0.0, v, u, age, accel, half)
+    d0 = math.hypot(*point)
+    assert nearer >= 0.0
+    x = y = theta = 0.0
+    right, left = v + u * half, v - u * half          # wheels' ground speeds [m/s]
+    steps = 600
+    dt = age / steps
+    for k in range(steps):
+        ar, al = wheel_acc[k * len(wheel_acc) // steps]
+        right += ar * accel * dt
+        left += al * accel * dt
+        speed, turn = 0.5 * (right + left), (right - left) / base
+        x, y, theta = arc_step(x, y, theta, speed * dt, turn * dt)
+        assert math.hypot(point[0] - x, point[1] - y) >= d0 - nearer - 1e-6
+
+
+def test_a_neighbour_driving_away_is_not_grown_by_its_speed():
+    """Ahead of this robot and driving away at 1.5 m/s with 0.27 s old data (a 0.2 s link):
+    its disc grows by what braking or turning could leave it short of the extrapolation,
+    not by its whole travel; head on, by its whole travel."""
+    age, speed, base = 0.27, 1.5, 0.5
+    travel = speed * age + 0.5 * ACCEL * age ** 2
+    away = approach(-2.0, -2.0, math.atan2(2.0, 2.0), speed, 0.0, age, ACCEL, 0.5 * base)
+    head_on = approach(3.0, 0.0, 0.0, speed, 0.0, age, ACCEL, 0.5 * base)
+    assert away < 0.3 * travel
+    assert head_on == pytest.approx(speed * age + 0.5 * ACCEL * age ** 2
+                                    + speed * ACCEL * age ** 3 / (3.0 * base))
+    _, half = neighbour_hazard(speed, 0.0, age, 0.4, A, ACCEL, TOP, STALE, STOP, nearer=away)
+    assert half == pytest.approx(A + away + 0.4)
+    assert approach(3.0, 0.0, 0.0, speed, 0.0, age, math.inf, 0.25) == math.inf   # ideal
 
 
 def test_without_the_trail_a_dead_neighbour_s_half_is_taken_twice():
