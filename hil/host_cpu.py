@@ -29,7 +29,7 @@ class CpuTimes:
 
     total: int
     steal: int
-    idle: int = 0        # idle and waiting for I/O
+    idle: int            # idle and waiting for I/O
 
 
 def cpu_times(stat: Path = PROC_STAT) -> CpuTimes | None:

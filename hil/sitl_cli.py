@@ -185,9 +185,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
 TRUTH_GAP_WARN = 0.25   # s between truth samples (published every 10 ms) worth a warning
 CLOCK_STEP_WARN = 0.1   # s of wall-clock step during a mission worth a warning
 CPU_STEAL_WARN = 0.15   # share of the CPU a VM's host steals during a mission worth a warning
-
-
-SATURATED = 0.9        # share of the CPU busy in a mission at which the machine had no room
+SATURATED = 0.9         # share of the CPU busy in a mission at which the machine had no room
 
 
 def saturation(busy: float | None) -> str:
