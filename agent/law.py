@@ -23,7 +23,9 @@ Every period the robot picks one of three modes:
 On a robot with a braking deceleration a_brake, TRACK and ROTATE close in on the reference
 no faster than w + sqrt(a_brake |e|), w the reference's speed away from the robot (p_d_dot
 along -e), so that it arrives instead of overshooting (the paper's K |e| asks for a
-deceleration of K v).
+deceleration of K v). In TRACK it follows the reference's velocity plus that closing speed,
+w = p_d_dot - min(K min(D_max, |e|), sqrt(a_brake |e|)) e/|e|, theta_d = atan2(w), speed |w|
+(docs/controller.md A16), so it neither lags nor turns round when it comes past.
 
 On such a robot the heading loop also turns no faster than lets it stop turning within
 e_theta at half its ramp (docs/controller.md A15). Then |u| is clipped to u_max (|v| <=
@@ -164,6 +166,14 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     theta_d = math.atan2(-ey, -ex)
     dist = D
     mode = TRACK
+    follow = -1.0                       # the speed of the velocity to follow (A16); -1: none
+    if not math.isinf(p.accel):
+        # follow the reference's velocity, closing in on it as A12 allows (docs A16)
+        close = min(p.K * min(p.D_max, D), math.sqrt(p.accel * D)) / D if D > EPS else 0.0
+        wx, wy = ref_vx - close * ex, ref_vy - close * ey
+        follow = math.sqrt(wx * wx + wy * wy)
+        if follow > EPS:
+            theta_d, ff = math.atan2(wy, wx), 0.0
 
     # AVOID decision, with hysteresis on the neighbour part
     n_nbr, n_obs = len(nbr_x), len(obs_r)
@@ -274,7 +284,9 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
 
     e_theta = 0.0 if dist < EPS else wrap_angle(theta - theta_d)
     speed = p.K * min(p.D_max, dist)
-    if mode != AVOID and not math.isinf(p.accel):
+    if mode == TRACK and follow >= 0.0:
+        speed = follow
+    elif mode != AVOID and not math.isinf(p.accel):
         # arrive, do not overshoot: close in on the reference no faster than the robot can
         # shed at half its braking deceleration (the other half is left for turning)
         away = -(ref_vx * ex + ref_vy * ey) / D if D > EPS else 0.0   # m/s, p_d_dot along -e
