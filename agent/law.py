@@ -171,7 +171,7 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         # follow the reference's velocity, closing in on it as A12 allows (docs A16)
         close = min(p.K * min(p.D_max, D), math.sqrt(p.accel * D)) / D if D > EPS else 0.0
         wx, wy = ref_vx - close * ex, ref_vy - close * ey
-        follow = math.sqrt(wx * wx + wy * wy)
+        follow = min(math.sqrt(wx * wx + wy * wy), p.K * p.D_max)
         if follow > EPS:
             theta_d, ff = math.atan2(wy, wx), 0.0
 
