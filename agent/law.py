@@ -24,7 +24,8 @@ On a robot with a braking deceleration a_brake, TRACK and ROTATE close in on the
 no faster than w + sqrt(a_brake |e|), w the reference's speed away from the robot (p_d_dot
 along -e), so that it arrives instead of overshooting (the paper's K |e| asks for a
 deceleration of K v). In TRACK it follows the reference's velocity plus that closing speed,
-w = p_d_dot - min(K min(D_max, |e|), sqrt(a_brake |e|)) e/|e|, theta_d = atan2(w), speed |w|
+w = p_d_dot - min(K min(D_max, |e|), sqrt(a_brake |e|)) e/|e|, theta_d = atan2(w), speed
+min(|w|, K D_max)
 (docs/controller.md A16), so it neither lags nor turns round when it comes past.
 
 On such a robot the heading loop also turns no faster than lets it stop turning within
