@@ -105,7 +105,8 @@ def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate
     ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
     length2 = ex * ex + ey * ey
     t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
-    off = math.sqrt((rel_x - t * ex) ** 2 + (rel_y - t * ey) ** 2)
+    ox, oy = rel_x - t * ex, rel_y - t * ey      # products, not ** (pow rounds otherwise)
+    off = math.sqrt(ox * ox + oy * oy)
     rho = 0.5 * accel * age * age + abs(speed) * (
         0.5 * abs(turn_rate) * age * age + accel * age * age * age / (6.0 * half_base))
     return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho

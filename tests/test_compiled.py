@@ -67,6 +67,18 @@ def test_imperfect_world_compiled_equals_interpreted():
     assert a.metrics.summary("x", 1.0)["max_pose_error"] > 0
 
 
+def test_approach_compiled_equals_interpreted():
+    """The governor's bound along a neighbour's report, on random inputs, bit for bit (a
+    ``** 2`` there once rounded differently interpreted, through pow, than compiled)."""
+    from agent.governor import approach
+    rng = np.random.default_rng(1)
+    compiled_approach = compiled.kernels().approach
+    for _ in range(20000):
+        args = (*rng.uniform(-5, 5, 2), *rng.uniform(-4, 4, 3), float(rng.choice([0.0, 0.3])),
+                float(rng.choice([1.0, 25.0])), rng.uniform(0.2, 0.4))
+        assert approach(*args) == compiled_approach(*args), args
+
+
 def test_compiled_needs_numba(monkeypatch):
     monkeypatch.setattr(compiled, "available", lambda: False)
     sc = load_scenario(SCENARIOS / "paper.toml")
