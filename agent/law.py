@@ -283,15 +283,15 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         if nearest < within:
             theta_d, ff = heading, 0.0
 
-    e_theta = 0.0 if dist < EPS else wrap_angle(theta - theta_d)
     speed = p.K * min(p.D_max, dist)
     if mode == TRACK and follow >= 0.0:
-        speed = follow
+        dist = speed = follow           # heading and speed of the velocity to follow (A16)
     elif mode != AVOID and not math.isinf(p.accel):
         # arrive, do not overshoot: close in on the reference no faster than the robot can
         # shed at half its braking deceleration (the other half is left for turning)
         away = -(ref_vx * ex + ref_vy * ey) / D if D > EPS else 0.0   # m/s, p_d_dot along -e
         speed = max(min(speed, away + math.sqrt(p.accel * D)), 0.0)
+    e_theta = 0.0 if dist < EPS else wrap_angle(theta - theta_d)
     v = math.cos(e_theta) * speed
     turn = -p.K_theta * e_theta
     if not math.isinf(p.accel):
