@@ -25,8 +25,8 @@ no faster than w + sqrt(a_brake |e|), w the reference's speed away from the robo
 along -e), so that it arrives instead of overshooting (the paper's K |e| asks for a
 deceleration of K v). In TRACK it follows the reference's velocity plus that closing speed,
 w = p_d_dot - min(K min(D_max, |e|), sqrt(a_brake |e|)) e/|e|, theta_d = atan2(w), speed
-min(|w|, K D_max)
-(docs/controller.md A16), so it neither lags nor turns round when it comes past.
+min(|w|, K D_max) (docs/controller.md A16), so it neither lags nor turns round when it
+comes past.
 
 On such a robot the heading loop also turns no faster than lets it stop turning within
 e_theta at half its ramp (docs/controller.md A15). Then |u| is clipped to u_max (|v| <=
@@ -167,14 +167,15 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     theta_d = math.atan2(-ey, -ex)
     dist = D
     mode = TRACK
-    follow = -1.0                       # the speed of the velocity to follow (A16); -1: none
+    follow = 0.0                        # m/s, the speed of the velocity to follow (A16)
     if not math.isinf(p.accel):
-        # follow the reference's velocity, closing in on it as A12 allows (docs A16)
+        # follow the reference's velocity, closing in on it as A12 allows (docs A16); theta_d
+        # is not the error's bearing, so its rate is no feed-forward
         close = min(p.K * min(p.D_max, D), math.sqrt(p.accel * D)) / D if D > EPS else 0.0
         wx, wy = ref_vx - close * ex, ref_vy - close * ey
-        follow = min(math.sqrt(wx * wx + wy * wy), p.K * p.D_max)
+        follow, ff = min(math.sqrt(wx * wx + wy * wy), p.K * p.D_max), 0.0
         if follow > EPS:
-            theta_d, ff = math.atan2(wy, wx), 0.0
+            theta_d = math.atan2(wy, wx)
 
     # AVOID decision, with hysteresis on the neighbour part
     n_nbr, n_obs = len(nbr_x), len(obs_r)
@@ -284,7 +285,7 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
             theta_d, ff = heading, 0.0
 
     speed = p.K * min(p.D_max, dist)
-    if mode == TRACK and follow >= 0.0:
+    if mode == TRACK and not math.isinf(p.accel):
         dist = speed = follow           # heading and speed of the velocity to follow (A16)
     elif mode != AVOID and not math.isinf(p.accel):
         # arrive, do not overshoot: close in on the reference no faster than the robot can
