@@ -118,13 +118,15 @@ def test_sitl_paper_scenario(launch):
     assert m["converged"] and m["convergence_time"] <= 12.0, out
     assert sum(s["watchdog_trips"].values()) == 0, s["watchdog_trips"]
     assert s["truth_gap"]["seconds"] < 0.1, s["truth_gap"]
-    # after convergence, each robot within 0.5 m of the batch simulation of the same robot
-    # (its wheels, which make the law follow the reference's velocity: controller.md A16)
+    # settled (a second after convergence: at that instant a robot may still be closing in,
+    # a little earlier or later than in the batch), each robot within 0.5 m of the batch
+    # simulation of the same robot (its wheels, which make the law follow the reference's
+    # velocity: controller.md A16)
     data = read_run(run.out)
     ideal = load_robot_profile(str(ROOT / "robots" / "ideal.toml"))
     batch = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, ideal,
                      SimOptions(duration=12.0, plant=PlantKind.WHEELS))
-    after = data.t >= m["convergence_time"]
+    after = data.t >= m["convergence_time"] + 1.0
     k = np.searchsorted(batch.t, data.t[after])
     gap = np.hypot(*(data.pose[after, :, :2] - batch.pose[k, :, :2]).transpose(2, 0, 1))
     assert gap.max() < 0.5, gap.max()
