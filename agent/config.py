@@ -94,6 +94,12 @@ class RobotParams:
         doc="the drivers' watchdog (ODrive axis.config.watchdog_timeout, with "
             "enable_watchdog = True): a wheel goes on with its last command this long "
             "after the last CAN frame to its driver, then idles")
+    speed_up: float = setting(
+        0.0, unit="m/s^2", lo=0.0,
+        doc="the most the law speeds the robot up, below what its wheels can: its speed "
+            "and each wheel's share of its turn grow by at most this (braking still takes "
+            "the full ramp). Its neighbours count on it when its data is old, so a swarm "
+            "sets it alike on every robot (0: the wheels' ramp)")
     wheel_slip: float = setting(
         0.0, unit="1", lo=0.0, hi=0.5,
         doc="the most a wheel may slip (the fraction of its turn that does not move the "
@@ -113,6 +119,12 @@ class RobotParams:
     def a_max(self) -> float:
         """Largest translational acceleration [m/s^2] the wheel ramp allows."""
         return 2.0 * math.pi * self.wheel_radius * self.wheel_ramp
+
+    @property
+    def a_up(self) -> float:
+        """Largest acceleration [m/s^2] the law speeds the robot up by (``speed_up``, at
+        most :attr:`a_max`)."""
+        return min(self.speed_up, self.a_max) if self.speed_up > 0.0 else self.a_max
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,8 @@ stop in the free distance it owns, after a reaction time and at its braking dece
   *reported* position, grown by a, by what it can have travelled since its stamp toward this
   robot (its speed and acceleration over the data age, at most the swarm's top speed, or
   less where its reported heading and turn rate say it was driving elsewhere:
-  :func:`approach`) and by this robot's own path over that age. It runs the same
+  :func:`approach`; its acceleration is its law's speed-up where that is below its
+  wheels' ramp, docs/controller.md A17) and by this robot's own path over that age. It runs the same
   governor, so the free distance between the two is shared half and half: its share is
   what it claimed when it last acted on data of this robot, and whatever happened since
   (it may have died then) is on this robot, whose path over the data age the disc counts
@@ -44,19 +45,22 @@ MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nea
 
 def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: float,
                      accel: float, top_speed: float, staleness: float, stop_time: float,
-                     wheel_top: float = math.inf, nearer: float = math.inf
-                     ) -> tuple[float, float]:
+                     wheel_top: float = math.inf, nearer: float = math.inf,
+                     speed_up: float = math.inf, lag: float = 0.0) -> tuple[float, float]:
     """(full, half): the exclusion radii [m] around a neighbour's reported position, last
     reported moving at ``speed`` [m/s] and turning with its wheels ``turn`` [m/s] apart
     (half the difference of their ground speeds: |u| times half the wheel base) ``age`` [s]
     ago, ``trail`` [m] this robot's own path since then. This robot owns
     min(d - full, (d - half) / 2) of a distance d to it (-inf: that rule does not apply).
-    ``accel`` [m/s^2] and ``top_speed`` [m/s] bound how its speed can have changed since,
-    ``wheel_top`` [m/s] each wheel's ground speed (so the wheels are at most
-    wheel_top - speed apart); ``stop_time`` [s] is how long a dead agent's drivers keep
-    going before they brake (watchdog and drive latency). ``nearer`` [m]: how much nearer
-    to this robot than its reported position it can be by now, when known from where it
-    was heading (:func:`approach`); heard from, its disc grows by no more than that.
+    ``accel`` [m/s^2] (its wheels' ramp), ``speed_up`` [m/s^2] (the most its law speeds
+    it up: its speed and its wheels' half difference) and ``top_speed`` [m/s] bound how its
+    speed can have changed since, ``lag`` [s] how late its wheels follow the commands it
+    reports (a period and the drive latency), ``wheel_top`` [m/s] each wheel's ground speed
+    (so the wheels are at most wheel_top - speed apart); ``stop_time`` [s] is how long a
+    dead agent's drivers keep going before they brake (watchdog and drive latency).
+    ``nearer`` [m]: how much nearer to this robot than its reported position it can be by
+    now, when known from where it was heading (:func:`approach`); heard from, its disc
+    grows by no more than that.
 
     Heard from (age <= staleness): half of the gap beyond a, its travel since the stamp and
     this robot's trail. When it last acted, at its stamp or as late as it lived after it,
@@ -71,49 +75,67 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
     age = min(max(age, 0.0), staleness)     # silent: it may have died as late as that
     grow = top_speed * age
     if not math.isinf(accel):
-        grow = min(grow, speed * age + 0.5 * accel * age * age)
+        up = min(speed_up, accel)
+        # its wheels within a ramp of the command it reported for the lag, then its
+        # speed grown by at most speed_up since (or, more loosely, the ramp all along)
+        grow = min(grow, speed * age + min(0.5 * accel * age * age + accel * lag * age,
+                                           0.5 * up * age * age + accel * lag * lag))
     if not silent:
         return -math.inf, a + min(grow, nearer) + trail
     now, turn_now = top_speed, turn
     if not math.isinf(accel):
-        now = min(now, speed + accel * age)
+        up = min(speed_up, accel)
+        now = min(now, speed + accel * lag + up * age)
         # each wheel's speed changes at most accel and stays within wheel_top; the longest
         # stop is at the fastest speed, the wheels as far apart as that leaves them
-        turn_now = min(turn + accel * age, max(wheel_top - now, 0.0))
+        turn_now = min(turn + accel * lag + up * age, max(wheel_top - now, 0.0))
     return a + grow + stopping(now, accel, stop_time, turn_now), -math.inf
 
 
 def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
-             age: float, accel: float, half_base: float) -> float:
+             age: float, accel: float, half_base: float, speed_up: float = math.inf,
+             lag: float = 0.0) -> float:
     """How much nearer [m] a neighbour can be by now to a point (``rel_x``, ``rel_y``) [m]
-    from its reported position than that position is, having reported moving at ``speed``
-    [m/s] (signed, along ``heading`` [rad]) and turning at ``turn_rate`` [rad/s] ``age``
-    [s] ago, each wheel's ground speed changing by at most ``accel`` [m/s^2], the wheels
-    2 ``half_base`` [m] apart (inf: no bound, on wheels that change speed at once).
+    from its reported position than that position is, having reported commanding ``speed``
+    [m/s] (signed, along ``heading`` [rad]) and ``turn_rate`` [rad/s] ``age`` [s] ago, each
+    wheel's ground speed changing by at most ``accel`` [m/s^2], its law speeding it up (its
+    speed and each wheel's share of its turn) by at most ``speed_up`` [m/s^2], its wheels
+    following its commands ``lag`` [s] late (a period and the drive latency) and 2
+    ``half_base`` [m] apart (accel inf: no bound, on wheels that change speed at once).
 
     Since its stamp it has been within rho of the segment from its reported position to
-    where its report extrapolates to now: its speed differs from the reported one by at most
-    accel t, and its heading from the reported one by at most |u| t + accel t^2 / (2
-    half_base) (its turn rate changes at most accel / half_base), so after t it is off the
-    straight line by at most accel t^2 / 2 + |v| (|u| t^2 / 2 + accel t^3 / (6 half_base))
-    (docs/controller.md, A10). The point's distance to that segment, less rho, bounds its
-    distance to the neighbour at any time since the stamp: a neighbour driving away is not
-    counted as if it could have turned back at once."""
+    where its report extrapolates to now (docs/controller.md, A10 and A17): its turn rate
+    is within accel lag / half_base of the reported one for the lag, then grows by at most
+    speed_up / half_base, which bounds how far its heading turns from the reported one.
+    Its speed differs from the reported one by at most accel (t + lag), rho including that
+    whole difference; or, braking along the segment, its speed grows past the reported one
+    (or past zero, reversing) by at most accel lag then speed_up t, rho including only that
+    growth and the turn of the faster speed. The smaller counts. The point's distance to
+    the segment, less rho, bounds its distance to the neighbour at any time since the
+    stamp: a neighbour driving away is not counted as if it could have turned back at
+    once."""
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
     age = max(age, 0.0)
+    up = min(speed_up, accel)
     ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
     length2 = ex * ex + ey * ey
     t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
     ox, oy = rel_x - t * ex, rel_y - t * ey      # products, not ** (pow rounds otherwise)
     off = math.sqrt(ox * ox + oy * oy)
-    rho = 0.5 * accel * age * age + abs(speed) * (
-        0.5 * abs(turn_rate) * age * age + accel * age * age * age / (6.0 * half_base))
+    age2 = age * age
+    # the heading's departure from the reported one, integrated over the age [rad s]
+    swing = (0.5 * abs(turn_rate) * age2 + accel * lag * lag * age / half_base
+             + up * age2 * age / (6.0 * half_base))
+    rho = min(0.5 * accel * age2 + accel * lag * age + abs(speed) * swing,
+              0.5 * up * age2 + accel * lag * lag
+              + (abs(speed) + accel * lag + up * age) * swing)
     return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho
 
 
 def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: float,
-                  staleness: float, stop_time: float, wheel_top: float = math.inf) -> float:
+                  staleness: float, stop_time: float, wheel_top: float = math.inf,
+                  speed_up: float = math.inf, lag: float = 0.0) -> float:
     """The radius [m] of the obstacle the law goes round for a silent neighbour (arguments
     as :func:`neighbour_hazard`): its silent disc less a, since the law keeps b > a from an
     obstacle's surface, at least a/2. On a robot that brakes at once (infinite ``accel``)
@@ -122,7 +144,7 @@ def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: 
     if math.isinf(accel):
         return 0.5 * a
     full, _ = neighbour_hazard(speed, turn, math.inf, 0.0, a, accel, top_speed, staleness,
-                               stop_time, wheel_top)
+                               stop_time, wheel_top, math.inf, speed_up, lag)
     return max(0.5 * a, full - a)
 
 
@@ -163,8 +185,8 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
                  haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq, haz_half: FloatSeq,
                  haz_moving: FloatSeq, accel: float, period: float, latency: float,
                  turn_rate: float, wheel_base: float,
-                 top_speed: float = math.inf, margin: float = 0.0
-                 ) -> tuple[float, float, float]:
+                 top_speed: float = math.inf, margin: float = 0.0,
+                 speed_up: float = math.inf) -> tuple[float, float, float]:
     """(forward, backward) speed limits [m/s] (inf: none) of a robot at (x, y, theta)
     [m, m, rad] moving at (v_now [m/s], u_now [rad/s]) among hazards (centre; exclusion
     radii [m]: of the whole free distance, and of the half this robot owns (-inf: no such
@@ -178,12 +200,13 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
 
     While it stops, the robot's heading sweeps on at u_now (braking takes the whole ramp of
     both wheels, so the turn rate holds) and may turn further during the reaction time: at
-    up to ``turn_rate`` [rad/s] more, or, with finite ``accel``, as far as its wheels can
-    bend the path in that time (u changing at 2 accel / wheel_base: accel tau^2 /
-    wheel_base), whichever is less. A hazard counts with the cosine of its bearing's angle to the
-    nearest heading of that sweep (1 inside it; none beyond 90 degrees); a moving one as if
-    its bearing were MOVING_PAD nearer, as its own motion turns the line of sight. Hazards
-    farther than the robot needs to stop from ``top_speed`` [m/s] are skipped.
+    up to ``turn_rate`` [rad/s] more, or, with finite ``accel``, as far as its law lets its
+    wheels bend the path in that time (u changing at 2 ``speed_up`` / wheel_base, speed_up
+    [m/s^2] at most accel: speed_up tau^2 / wheel_base), whichever is less. A hazard counts
+    with the cosine of its bearing's angle to the nearest heading of that sweep (1 inside
+    it; none beyond 90 degrees); a moving one as if its bearing were MOVING_PAD nearer, as
+    its own motion turns the line of sight. Hazards farther than the robot needs to stop
+    from ``top_speed`` [m/s] are skipped.
 
     The speeds keep ``margin`` [m] more to every hazard, room for the robot's drift along its
     heading while it turns with slipping wheels (:func:`turn_limit`); the third value is that
@@ -199,7 +222,7 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     sweep = u_now * stop_time
     bend = turn_rate * reaction
     if not math.isinf(accel) and wheel_base > 0.0:
-        bend = min(bend, accel * reaction * reaction / wheel_base)
+        bend = min(bend, min(speed_up, accel) * reaction * reaction / wheel_base)
     spread = 0.5 * abs(sweep) + bend
     middle = theta + 0.5 * sweep
     reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period, turn)

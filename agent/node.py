@@ -422,6 +422,7 @@ class Agent:
         s = self.s
         grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
         half_base, disc = self._disc_args()
+        commit = self._commitment()
         staleness = s.timeouts.staleness
         x, y, me = pose[0], pose[1], s.robot_id
         reach = s.sensing_range + disc[2] * staleness
@@ -436,9 +437,9 @@ class Agent:
             if rid == me or dx * dx + dy * dy > reach * reach:
                 continue
             age = now_w - m.stamp
-            nearer = approach(-dx, -dy, m.theta, m.v, m.u, age, disc[1], half_base)
+            nearer = approach(-dx, -dy, m.theta, m.v, m.u, age, disc[1], half_base, *commit)
             full, half = neighbour_hazard(m.v, half_base * m.u, age,
-                                          self.trail.since(m.stamp), *disc, nearer)
+                                          self.trail.since(m.stamp), *disc, nearer, *commit)
             hx.append(m.x)
             hy.append(m.y)
             hr.append(full + grow)
@@ -461,6 +462,13 @@ class Agent:
                                     s.timeouts.staleness, r.watchdog_timeout + r.drive_latency,
                                     r.v_wheel_max)
 
+    def _commitment(self) -> tuple[float, float]:
+        """(speed-up [m/s^2], lag [s]): how fast a neighbour's law speeds it up and how late
+        its wheels follow the command it reports (agent.governor.approach, A17); the
+        swarm's robots are alike."""
+        r = self.s.robot
+        return r.a_up, self.s.control.period + r.drive_latency
+
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],
                       obs: ObstaclesMsg | None, now_w: float
@@ -482,7 +490,7 @@ class Agent:
             half_base, disc = self._disc_args()
             for i in near.stale:
                 m = recs[i].msg
-                obs_r.append(silent_radius(m.v, half_base * m.u, *disc))
+                obs_r.append(silent_radius(m.v, half_base * m.u, *disc, *self._commitment()))
         return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:

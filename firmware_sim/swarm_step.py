@@ -168,6 +168,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     staleness, stop_time, top_speed = world_f[2], world_f[3], world_f[4]
     ring = len(path)                    # periods of the robots' own path kept
     wheel_top = TWO_PI * p.wheel_radius * p.speed_limit    # m/s, each wheel's ground speed
+    lag = period + p.latency          # s, how late the wheels follow a reported command
     need, need_watch = 0, 0
     max_r = obs[:, 2].max() if len(obs) else 0.0
     nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
@@ -200,11 +201,12 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             ago = min(max(int(math.ceil(age / period - 1e-9)), 0), ring - 1)
             trail = path[step % ring, i] - path[(step - ago) % ring, i]
             nearer = approach(x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3],
-                              view[j, 4], age, p.accel, 0.5 * p.wheel_base)
+                              view[j, 4], age, p.accel, 0.5 * p.wheel_base, p.speed_up, lag)
             h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3],
                                                   0.5 * view[j, 4] * p.wheel_base, age,
-                                                  trail, a, p.accel, top_speed, staleness,
-                                                  stop_time, wheel_top, nearer)
+                                                  trail, a, p.accel, top_speed,
+                                                  staleness, stop_time, wheel_top, nearer,
+                                                  p.speed_up, lag)
             h_r[n_h] += grow
             h_h[n_h] += grow
             h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness
@@ -225,8 +227,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                         j = nbr_j[q]
                         o_x[k], o_y[k], o_k[k] = nbr_x[q], nbr_y[q], -1
                         o_r[k] = silent_radius(view[j, 3], 0.5 * view[j, 4] * p.wheel_base,
-                                               a, p.accel, top_speed, staleness, stop_time,
-                                               wheel_top)
+                                               a, p.accel, top_speed, staleness,
+                                               stop_time, wheel_top, p.speed_up, lag)
                     k += 1
                 elif status == FRESH:
                     nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]

@@ -132,7 +132,7 @@ def test_driver_error_triggers_failsafe_with_its_name():
 
 def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     """On a cart (3 m/s, 2 m/s^2): the governor keeps it out of the silent robot's disc
-    (where that could have driven before it must have stopped: 1.9 m), and the law goes
+    (where that could have driven before it must have stopped: 2.0 m), and the law goes
     round it as an obstacle of that disc less a (agent.governor.silent_radius)."""
     cart = RobotParams(wheel_radius=0.0825, wheel_base=0.8, wheel_speed_limit=5.79,
                        wheel_ramp=3.86, drive_latency=0.02)
@@ -146,8 +146,9 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     near, obs_x, obs_y, obs_r = a._surroundings(a.odometry.pose, a.swarm.neighbours(),
                                                 a.swarm.obstacles(), clock.wall())
     disc = neighbour_hazard(0.0, 0.0, 1.0, 0.0, 1.0, cart.a_max, cart.v_wheel_max, 0.5,
-                            0.1 + cart.drive_latency)[0]
-    assert disc == pytest.approx(1.87, abs=0.01)
+                            0.1 + cart.drive_latency, math.inf, math.inf, cart.a_up,
+                            0.02 + cart.drive_latency)[0]
+    assert disc == pytest.approx(1.97, abs=0.01)
     assert near.fresh_x == [] and (obs_x, obs_y) == ([4.0], [0.0])
     assert obs_r == [pytest.approx(disc - 1.0)]
     dmin = np.inf
@@ -302,7 +303,10 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
     assert driven > 0.3 and age == pytest.approx(0.3)
     hx, hy, hr, hh, hm = agent._hazards(agent.odometry.pose, agent.swarm.neighbours(), [],
                                         [], [], 0, clock.wall())
-    travel = 0.5 * cart.a_max * age ** 2         # reported still: it can only have sped up
+    # reported still: it can only have sped up, its wheels a ramp off the report for the
+    # lag (a period and the drive latency, A17)
+    lag = agent.s.control.period + cart.drive_latency
+    travel = 0.5 * cart.a_max * age ** 2 + cart.a_max * lag ** 2
     assert hr == [-math.inf]
     assert hh == [pytest.approx(agent.s.control.a + travel + driven, rel=1e-6)]
 

@@ -452,6 +452,23 @@ def test_smoke_report_has_groups_and_intervals_and_its_replay_writes_a_run_folde
     assert main(["report", str(run)]) == 0
 
 
+@pytest.mark.parametrize("spec_file", sorted((ROOT / "campaigns").glob("*.toml")),
+                         ids=lambda p: p.stem)
+def test_every_shipped_campaign_expands(spec_file, families):
+    """Each campaign in campaigns/ loads, its profiles and families included."""
+    from hil.campaign_spec import load_spec
+    spec = load_spec(spec_file)
+    assert spec.runs and len({r.key for r in spec.runs}) == len(spec.runs)
+
+
+def test_the_speed_up_campaign_sets_speed_up_on_one_of_each_pair(families):
+    from hil.campaign_spec import load_spec
+    spec = load_spec(ROOT / "campaigns" / "speed-up.toml")
+    speed_up = {r.description["profile"]: r.description["robot"].get("speed_up", 0.0)
+                for r in spec.runs}
+    assert speed_up == {"sporty": 2.0, "sporty-ramp": 0.0, "fast": 0.0, "fast-speed-up": 2.0}
+
+
 def test_the_realistic_campaign_has_over_a_thousand_runs(families):
     from hil.campaign_spec import load_spec
     spec = load_spec(REALISTIC)

@@ -98,6 +98,73 @@ def test_a_neighbour_is_never_nearer_than_its_heading_allows(v, u, accel, base, 
         assert math.hypot(point[0] - x, point[1] - y) >= d0 - nearer - 1e-6
 
 
+def _toward(value: float, target: float, step: float) -> float:
+    return value + min(max(target - value, -step), step)
+
+
+def _committed(now: float, choice: float, up: float, brake: float) -> float:
+    """A set-point part one step on: grown by ``up`` (choice 1), held (0), or braked by
+    ``brake`` toward zero and past it by at most ``up`` (-1)."""
+    if choice > 0.0:
+        return now + math.copysign(up, now) if now != 0.0 else up
+    if choice < 0.0:
+        return now - brake if now > brake else (now + brake if now < -brake else
+                                                -math.copysign(up, now))
+    return now
+
+
+@settings(max_examples=300, deadline=None)
+@given(v=st.floats(-3.0, 3.0), u=st.floats(-4.0, 4.0), accel=st.floats(2.0, 25.0),
+       up=st.floats(0.5, 2.0), base=st.floats(0.3, 0.8), age=st.floats(0.01, 0.6),
+       lag=st.tuples(st.floats(0.01, 0.02), st.floats(0.0, 0.03)),
+       before=st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0)),
+       point=st.tuples(st.floats(-2.0, 6.0), st.floats(-2.0, 2.0)),
+       plan=st.lists(st.tuples(st.sampled_from([-1.0, 0.0, 1.0]),
+                               st.sampled_from([-1.0, 0.0, 1.0])), min_size=6, max_size=6))
+def test_a_neighbour_that_speeds_up_slowly_is_never_nearer_than_its_report_allows(
+        v, u, accel, up, base, age, lag, before, point, plan):
+    """A17: a neighbour whose law speeds it up (its speed and each wheel's share of its
+    turn) at ``up`` and brakes at up to ``accel``, reported at the origin commanding v
+    along x and u; its wheels follow its commands a drive latency late at their ramp, and
+    at the stamp still run the command of a period before (within a period's ramp of the
+    reported one). At every instant its distance to ``point`` is at least the distance
+    from the origin less :func:`approach` with that speed-up and lag."""
+    period, latency = lag
+    half = 0.5 * base
+    nearer = approach(point[0], point[1], 0.0, v, u, age, accel, half, up, period + latency)
+    d0 = math.hypot(*point)
+    sv, sw = v, u * half                               # set-point: speed, half difference
+    wv = v + before[0] * accel * period                # the wheels: the command before
+    ww = sw + before[1] * accel * period
+    x = y = theta = 0.0
+    steps = 600
+    dt = age / steps
+    history = [(sv, sw)]
+    for k in range(steps):
+        cv, cw = plan[k * len(plan) // steps]
+        sv = _committed(sv, cv, up * dt, accel * dt)
+        sw = _committed(sw, cw, up * dt, accel * dt)
+        history.append((sv, sw))
+        if (k + 1) * dt >= latency:                    # the command latency ago
+            tv, tw = history[max(len(history) - 1 - round(latency / dt), 0)]
+            right, left = wv + ww, wv - ww             # each wheel ramps on its own
+            right = _toward(right, tv + tw, accel * dt)
+            left = _toward(left, tv - tw, accel * dt)
+            wv, ww = 0.5 * (right + left), 0.5 * (right - left)
+        x, y, theta = arc_step(x, y, theta, wv * dt, ww / half * dt)
+        assert math.hypot(point[0] - x, point[1] - y) >= d0 - nearer - 1e-6
+
+
+def test_a_neighbour_that_speeds_up_slowly_is_grown_less_head_on():
+    """A sporty neighbour (25 m/s^2 wheels) heading at this robot with 0.5 s old data: its
+    law's 2 m/s^2 speed-up grows its disc by a fraction of what its wheels alone allow."""
+    age, speed, half = 0.5, 2.0, 0.25
+    wheels = approach(5.0, 0.0, 0.0, speed, 1.0, age, 25.0, half)
+    committed = approach(5.0, 0.0, 0.0, speed, 1.0, age, 25.0, half, 2.0, 0.03)
+    assert wheels - speed * age > 3.0                    # beyond 1/2 x 25 m/s^2 x age^2
+    assert committed - speed * age < 0.4 * (wheels - speed * age)
+
+
 def test_a_neighbour_driving_away_is_not_grown_by_its_speed():
     """Ahead of this robot and driving away at 1.5 m/s with 0.27 s old data (a 0.2 s link):
     its disc grows by what braking or turning could leave it short of the extrapolation,

@@ -16,8 +16,12 @@ from firmware_sim import compiled
 P = ControlParams()
 CART = RobotParams(wheel_radius=0.08, wheel_base=0.6, wheel_speed_limit=6.0, wheel_ramp=4.0,
                    drive_latency=0.02)
+# a sporty robot whose law speeds it up at 2 m/s^2 though its wheels ramp at 25 (A17)
+SPORTY = RobotParams(wheel_radius=0.1, wheel_base=0.5, wheel_speed_limit=12.73,
+                     wheel_ramp=39.8, drive_latency=0.01, speed_up=2.0)
 LP = LawParams.of(P, None)              # the ideal robot
 LP_CART = LawParams.of(P, CART)         # wheels with limits: the governor and the ramp act
+LP_SPORTY = LawParams.of(P, SPORTY)
 coord = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
 near = st.floats(-6.0, 6.0, allow_nan=False, allow_infinity=False)
 angle = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
@@ -94,7 +98,43 @@ def test_commands_are_ones_the_wheels_can_follow(case):
 
 
 @settings(max_examples=300, deadline=None)
-@given(cases(), st.sampled_from([LP, LP_CART]))
+@given(cases())
+def test_the_law_speeds_up_no_faster_than_it_commits_to(case):
+    """On a robot whose law speeds it up slower than its wheels ramp (A17): its speed and
+    its wheels' half difference grow by at most speed_up x T a period, past zero included;
+    slowing down may take the whole ramp."""
+    mem = case[-1]
+    v, u, _, _, new = run(law_step, case, lp=LP_SPORTY)
+    ground = 2 * math.pi * SPORTY.wheel_radius            # m/s per rev/s
+    up = SPORTY.speed_up * P.period + 1e-9
+
+    def grew(before: float, after: float) -> float:
+        return abs(after) - abs(before) if before * after >= 0.0 else abs(after)
+
+    assert grew(0.5 * ground * (mem.wheel_r + mem.wheel_l),
+                0.5 * ground * (new.wheel_r + new.wheel_l)) <= up
+    assert grew(0.5 * ground * (mem.wheel_r - mem.wheel_l),
+                0.5 * ground * (new.wheel_r - new.wheel_l)) <= up
+    step = SPORTY.wheel_ramp * P.period + 1e-9
+    assert abs(new.wheel_r - mem.wheel_r) <= step and abs(new.wheel_l - mem.wheel_l) <= step
+    assert max(abs(new.wheel_r), abs(new.wheel_l)) <= SPORTY.wheel_speed_limit + 1e-9
+
+
+def test_braking_takes_the_whole_ramp_though_speeding_up_does_not():
+    """The sporty robot of A17 at 5 m/s: asked to stop it sheds 25 m/s^2 x T in a period;
+    standing and asked to go, it gains 2 m/s^2 x T."""
+    ground = 2 * math.pi * SPORTY.wheel_radius
+    moving = LawMemory(wheel_r=5.0 / ground, wheel_l=5.0 / ground)
+    args = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, [], [], [], [], [], [], [], [], [], [], [])
+    v, _, _, _, _ = law_step(*args, moving, LP_SPORTY, P.period)
+    assert v == pytest.approx(5.0 - SPORTY.a_max * P.period)
+    v, _, _, _, _ = law_step(0.0, 0.0, 0.0, 5.0, 0.0, *args[5:], LawMemory(), LP_SPORTY,
+                             P.period)
+    assert v == pytest.approx(SPORTY.speed_up * P.period)
+
+
+@settings(max_examples=300, deadline=None)
+@given(cases(), st.sampled_from([LP, LP_CART, LP_SPORTY]))
 def test_compiled_law_equals_the_interpreted_one(case, lp):
     want = run(law_step, case, lp=lp)
     got = run(compiled.kernels().law_step, case, lambda c: np.array(c, dtype=float), lp=lp)
