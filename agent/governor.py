@@ -10,14 +10,14 @@ stop in the free distance it owns, after a reaction time and at its braking dece
   robot (its speed and acceleration over the data age, at most the swarm's top speed, or
   less where its reported heading and turn rate say it was driving elsewhere:
   :func:`approach`; its acceleration is its law's speed-up where that is below its
-  wheels' ramp, docs/controller.md A17) and by this robot's own path over that age. It runs the same
-  governor, so the free distance between the two is shared half and half: its share is
-  what it claimed when it last acted on data of this robot, and whatever happened since
-  (it may have died then) is on this robot, whose path over the data age the disc counts
-  in full. A silent neighbour (older than the staleness limit): a static disc at its last
-  known position grown by a and by what it could travel from its last report until it
-  must have stopped (its drivers' watchdog, then each wheel braking to rest on its own:
-  :func:`stopping`), taken in full.
+  wheels' ramp, docs/controller.md A17) and by this robot's own path over that age. It
+  runs the same governor, so the free distance between the two is shared half and half:
+  its share is what it claimed when it last acted on data of this robot, and whatever
+  happened since (it may have died then) is on this robot, whose path over the data age
+  the disc counts in full. A silent neighbour (older than the staleness limit): a static
+  disc at its last known position grown by a and by what it could travel from its last
+  report until it must have stopped (its drivers' watchdog, then each wheel braking to
+  rest on its own: :func:`stopping`), taken in full.
 * **Limit.** For a hazard at distance d the robot owns f = min(d - R, (d - R_half) / 2).
   Moving along its heading (or against it, when reversing) at speed v, with c the cosine
   of the angle between the hazard's bearing and the headings the robot can have while it
