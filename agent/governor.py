@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from agent.avoidance import FloatSeq
 
 EPS = 1e-9
+SPLITS = 4           # pieces of a neighbour's data age paired with this robot's path
 MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nearer the travel
 
 
@@ -90,6 +91,38 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
         # stop is at the fastest speed, the wheels as far apart as that leaves them
         turn_now = min(turn + accel * lag + up * age, max(wheel_top - now, 0.0))
     return a + grow + stopping(now, accel, stop_time, turn_now), -math.inf
+
+
+def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
+                    turn_rate: float, age: float, trails: FloatSeq, a: float, accel: float,
+                    half_base: float, top_speed: float, staleness: float, stop_time: float,
+                    wheel_top: float, speed_up: float, lag: float) -> tuple[float, float]:
+    """(full, half) of :func:`neighbour_hazard` for a neighbour reported at (x, y) = this
+    robot's position less (``rel_x``, ``rel_y``) [m], along ``heading`` [rad] at ``speed``
+    [m/s] and ``turn_rate`` [rad/s], ``age`` [s] ago; ``trails`` [m]: this robot's path
+    since each of len(trails) instants splitting the age evenly, the stamp first (the
+    other arguments as there and :func:`approach`).
+
+    Heard from, the neighbour last acted at some time since its stamp: its travel toward
+    this robot grows with that time and this robot's path since shrinks, so the two are
+    paired over each split of the age (the travel to its end, the path from its start)
+    and the largest sum counts, not the sum of the largest (docs/controller.md A10)."""
+    turn = half_base * abs(turn_rate)
+    if age > staleness or math.isinf(accel):
+        nearer = approach(rel_x, rel_y, heading, speed, turn_rate, age, accel, half_base,
+                          speed_up, lag)
+        return neighbour_hazard(speed, turn, age, trails[0], a, accel, top_speed, staleness,
+                                stop_time, wheel_top, nearer, speed_up, lag)
+    half = -math.inf
+    splits = len(trails)
+    for k in range(splits):
+        until = age * (k + 1) / splits
+        nearer = approach(rel_x, rel_y, heading, speed, turn_rate, until, accel, half_base,
+                          speed_up, lag)
+        _, h = neighbour_hazard(speed, turn, until, trails[k], a, accel, top_speed,
+                                staleness, stop_time, wheel_top, nearer, speed_up, lag)
+        half = max(half, h)
+    return -math.inf, half
 
 
 def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,

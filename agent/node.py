@@ -28,7 +28,7 @@ import numpy as np
 
 from agent.config import CONTROL_PARAMS
 from agent.formation import Formation
-from agent.governor import approach, neighbour_hazard, silent_radius
+from agent.governor import SPLITS, neighbour_radii, silent_radius
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step, moved_estimate, pair_active
 from agent.loop import Clock
@@ -437,9 +437,9 @@ class Agent:
             if rid == me or dx * dx + dy * dy > reach * reach:
                 continue
             age = now_w - m.stamp
-            nearer = approach(-dx, -dy, m.theta, m.v, m.u, age, disc[1], half_base, *commit)
-            full, half = neighbour_hazard(m.v, half_base * m.u, age,
-                                          self.trail.since(m.stamp), *disc, nearer, *commit)
+            trails = [self.trail.since(m.stamp + age * k / SPLITS) for k in range(SPLITS)]
+            full, half = neighbour_radii(-dx, -dy, m.theta, m.v, m.u, age, trails, disc[0],
+                                         disc[1], half_base, *disc[2:], *commit)
             hx.append(m.x)
             hy.append(m.y)
             hr.append(full + grow)

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from agent.formation import reference_point
-from agent.governor import approach, neighbour_hazard, silent_radius
+from agent.governor import SPLITS, neighbour_radii, silent_radius
 from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step, pair_active
 from firmware_sim.world_step import FRESH, NONE, STALE, detect
@@ -178,6 +178,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     o_k = np.empty(cap, np.int64)
     h_x, h_y, h_r = np.empty(2 * cap), np.empty(2 * cap), np.empty(2 * cap)
     h_h, h_m = np.empty(2 * cap), np.empty(2 * cap)
+    trails = np.empty(SPLITS)
     for i in range(lo, hi):
         x, y = own[i, 0], own[i, 1]
         m = sense_neighbours(i, x, y, sorted_seen, sensing_range, seen_grid, cap, nbr_x,
@@ -197,16 +198,16 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             if not truth and seen[j, 2] == NONE:
                 continue
             age = t - view[j, 5]
-            # this robot's path since the stamp: from the period at or before it
-            ago = min(max(int(math.ceil(age / period - 1e-9)), 0), ring - 1)
-            trail = path[step % ring, i] - path[(step - ago) % ring, i]
-            nearer = approach(x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3],
-                              view[j, 4], age, p.accel, 0.5 * p.wheel_base, p.speed_up, lag)
-            h_r[n_h], h_h[n_h] = neighbour_hazard(view[j, 3],
-                                                  0.5 * view[j, 4] * p.wheel_base, age,
-                                                  trail, a, p.accel, top_speed,
-                                                  staleness, stop_time, wheel_top, nearer,
-                                                  p.speed_up, lag)
+            # this robot's path since each split of the age: from the period at or before
+            for piece in range(SPLITS):
+                since = age * (SPLITS - piece) / SPLITS
+                ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
+                trails[piece] = path[step % ring, i] - path[(step - ago) % ring, i]
+            h_r[n_h], h_h[n_h] = neighbour_radii(x - view[j, 0], y - view[j, 1], view[j, 2],
+                                                 view[j, 3], view[j, 4], age, trails, a,
+                                                 p.accel, 0.5 * p.wheel_base, top_speed,
+                                                 staleness, stop_time, wheel_top,
+                                                 p.speed_up, lag)
             h_r[n_h] += grow
             h_h[n_h] += grow
             h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness

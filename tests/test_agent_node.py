@@ -7,7 +7,7 @@ from fakes import MirrorMotor, SharedSwarm
 from helpers import SimClock
 
 from agent.config import ControlParams, RobotParams
-from agent.governor import neighbour_hazard
+from agent.governor import SPLITS, neighbour_hazard
 from agent.loop import FixedRateLoop
 from agent.node import Agent
 from agent.settings import AgentSettings
@@ -282,8 +282,9 @@ def test_a_cart_brakes_for_a_dead_robot_through_its_governor():
 
 def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
     """A robot reported still 0.3 s ago (older than a period, within the staleness limit):
-    its shared disc is a, what it can have travelled since, and the path this agent drove
-    in those 0.3 s, read off its own odometry."""
+    its shared disc is a, then what it can have travelled by each split of those 0.3 s
+    and the path this agent drove since the split began, read off its own odometry, the
+    largest of the pairs (the first holds the whole path)."""
     cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
                        drive_latency=0.02)
     clock, net, (agent, other) = make_swarm([(0.0, 0.0, 0.0), (0.0, 6.0, 0.0)],
@@ -306,9 +307,15 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
     # reported still: it can only have sped up, its wheels a ramp off the report for the
     # lag (a period and the drive latency, A17)
     lag = agent.s.control.period + cart.drive_latency
-    travel = 0.5 * cart.a_max * age ** 2 + cart.a_max * lag ** 2
+
+    def travel(t: float) -> float:
+        return 0.5 * cart.a_max * t ** 2 + cart.a_max * lag ** 2
+
+    pairs = [travel(age * (k + 1) / SPLITS) + agent.trail.since(stamp + age * k / SPLITS)
+             for k in range(SPLITS)]
+    assert pairs[0] == pytest.approx(travel(age / SPLITS) + driven, rel=1e-6)
     assert hr == [-math.inf]
-    assert hh == [pytest.approx(agent.s.control.a + travel + driven, rel=1e-6)]
+    assert hh == [pytest.approx(agent.s.control.a + max(pairs), rel=1e-6)]
 
 
 def test_neighbour_age_is_split_into_stages_and_the_tail_names_the_slow_one():

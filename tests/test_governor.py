@@ -8,9 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.governor import (
+    SPLITS,
     approach,
     braking_speed,
     neighbour_hazard,
+    neighbour_radii,
     silent_radius,
     slip_margin,
     speed_limits,
@@ -65,6 +67,78 @@ def test_sharing_with_old_data_keeps_two_stops_apart_should_the_neighbour_die(pt
         return
     # each stop ends anywhere in its bound: the worst, both on the line between them
     assert dist(p, q) - own - theirs >= A - 1e-9
+
+
+def _drive(v: float, u: float, accel: float, half: float, age: float, plan: list, steps: int
+           ) -> list[tuple[float, float]]:
+    """Positions [m] every age/steps of a robot reported at the origin along x at v and u,
+    each wheel's ground speed changing at up to accel (piecewise, per ``plan``)."""
+    x = y = theta = 0.0
+    right, left = v + u * half, v - u * half
+    out = [(x, y)]
+    dt = age / steps
+    for k in range(steps):
+        ar, al = plan[k * len(plan) // steps]
+        right += ar * accel * dt
+        left += al * accel * dt
+        x, y, theta = arc_step(x, y, theta, 0.5 * (right + left) * dt,
+                               (right - left) / (2.0 * half) * dt)
+        out.append((x, y))
+    return out
+
+
+@settings(max_examples=300, deadline=None)
+@given(v=st.floats(-2.0, 2.0), u=st.floats(-2.0, 2.0), age=st.floats(0.02, 0.5),
+       start=st.tuples(st.floats(-6.0, 6.0), st.floats(-6.0, 6.0)),
+       legs=st.lists(st.tuples(st.floats(-math.pi, math.pi), st.floats(0.0, 3.0)),
+                     min_size=4, max_size=4),
+       plan=st.lists(st.tuples(st.sampled_from([-1.0, 0.0, 1.0]),
+                               st.sampled_from([-1.0, 0.0, 1.0])), min_size=4, max_size=4))
+def test_pairing_the_neighbour_s_travel_with_this_robot_s_path_keeps_stops_apart(
+        v, u, age, start, legs, plan):
+    """A10's argument over time: neighbour j, reported at the origin, drives on (wheels at
+    up to ACCEL) and last acts at any instant t of the age, at q(t), this robot then at
+    p(t), keeping its stop within half of |q(t) - p(t)| beyond a. This robot drove from
+    ``start`` in four straight legs to p and keeps its stop within half of |p - s| beyond
+    the half radius of :func:`neighbour_radii`, which pairs the two over the age's
+    splits. The two stops end at least a apart, whenever j last acted."""
+    steps = 64
+    half_base = 0.3
+    q = _drive(v, u, ACCEL, half_base, age, plan, steps)
+    p = [start]
+    for k in range(steps):
+        heading, speed = legs[k * len(legs) // steps]
+        dt = age / steps
+        p.append((p[-1][0] + speed * dt * math.cos(heading),
+                  p[-1][1] + speed * dt * math.sin(heading)))
+    walked = [0.0]
+    for k in range(steps, 0, -1):                 # path from each instant to the end
+        walked.insert(0, walked[0] + math.dist(p[k], p[k - 1]))
+    trails = [walked[round(steps * k / SPLITS)] for k in range(SPLITS)]
+    now = p[-1]
+    full, half = neighbour_radii(now[0], now[1], 0.0, v, u, age, trails, A, ACCEL,
+                                 half_base, TOP, STALE, STOP, 8.0, math.inf, 0.0)
+    own = 0.5 * (math.hypot(*now) - half)
+    assert full == -math.inf
+    for k in range(steps + 1):
+        theirs = 0.5 * (math.dist(q[k], p[k]) - A)
+        if own >= 0.0 and theirs >= 0.0:
+            assert math.dist(now, q[k]) - own - theirs >= A - 1e-6
+
+
+def test_a_neighbour_met_head_on_with_old_data_is_paired_with_this_robot_s_path():
+    """Both at 1.5 m/s toward each other, data 0.5 s old: the neighbour's travel and this
+    robot's path are not both counted in full (0.75 m each), only as far as they can add up
+    at one instant the neighbour last acted; with one split, in full."""
+    age, speed = 0.5, 1.5
+    trails = [speed * age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
+    args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0)
+    _, paired = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trails, *args)
+    _, whole = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trails[:1], *args)
+    travel = min(approach(-6.0, 0.0, math.pi, speed, 0.0, age, ACCEL, 0.3),
+                 speed * age + 0.5 * ACCEL * age * age)
+    assert whole == pytest.approx(A + travel + speed * age)     # 2.75 m
+    assert paired < whole - 0.5
 
 
 @settings(max_examples=300, deadline=None)
