@@ -10,8 +10,9 @@ stop in the free distance it owns, after a reaction time and at its braking dece
   robot (its speed and acceleration over the data age, at most the swarm's top speed, or
   less where its reported heading and turn rate say it was driving elsewhere:
   :func:`approach`; its acceleration is its law's speed-up where that is below its
-  wheels' ramp, docs/controller.md A17) and by this robot's own path over that age. It
-  runs the same governor, so the free distance between the two is shared half and half:
+  wheels' ramp, docs/controller.md A17) and by this robot's own path over that age, the
+  two paired at each instant the neighbour may last have acted (:func:`neighbour_radii`).
+  It runs the same governor, so the free distance between the two is shared half and half:
   its share is what it claimed when it last acted on data of this robot, and whatever
   happened since (it may have died then) is on this robot, whose path over the data age
   the disc counts in full. A silent neighbour (older than the staleness limit): a static

@@ -1,8 +1,8 @@
 """The robot's own path over the last seconds: how far it has gone since a time.
 
 The safety governor takes a neighbour's data of age t as that neighbour's share of the gap
-between them when it last acted, and counts in full this robot's own path since
-(:func:`agent.governor.neighbour_hazard`). The path is that of the pose the robot believes
+between them when it last acted, and counts this robot's own path since that instant
+(:func:`agent.governor.neighbour_radii`). The path is that of the pose the robot believes
 (odometry, fused fixes): a jump of the estimate counts as travel.
 """
 from __future__ import annotations
