@@ -48,9 +48,9 @@ def test_a_scenario_without_world_is_the_ideal_world():
 
 def test_link_delay_makes_the_governor_work_harder():
     """The grid scenario with the fast profile (6 m/s, 6 m/s^2): with neighbour states
-    0.3 s old the safety governor must lower the speed in half again as many periods as
-    with fresh ones (the discs it keeps clear of grow with the data's age), and the robots
-    still keep their distance."""
+    0.3 s old the safety governor must lower the speed in a quarter again as many periods as
+    with fresh ones, and the robots pass each other wider (the discs it keeps clear of grow
+    with the data's age)."""
     sc = load_scenario(ROOT / "scenarios" / "grid.toml")
     fast = load_robot_profile(ROOT / "robots" / "fast.toml")
 
@@ -61,8 +61,8 @@ def test_link_delay_makes_the_governor_work_harder():
         return r.metrics.summary("grid", 20.0)
 
     fresh, late = metrics(0.0), metrics(0.3)
-    assert late["governor_share"] > 1.5 * fresh["governor_share"]
-    assert late["min_pair_distance"] > sc.control.a
+    assert late["governor_share"] > 1.25 * fresh["governor_share"]
+    assert late["min_pair_distance"] > fresh["min_pair_distance"] > sc.control.a
 
 
 def test_a_killed_robot_stands_still_after_its_watchdog_and_braking():
