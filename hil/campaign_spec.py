@@ -46,8 +46,8 @@ from hil.scenario import ScenarioError
 
 TOP_KEYS = {"name", "description", "duration", "seeds", "profiles", "family", "world",
             "mocap", "control"}
-FAMILY_TEXT = ("kind", "slots", "field")          # family keys holding strings
-FAMILY_KEYS = ("kind", "robots", "spacing", "slots", "field", "speed")
+FAMILY_TEXT = ("kind", "slots", "field", "assign")   # family keys holding strings
+FAMILY_KEYS = ("kind", "robots", "spacing", "slots", "field", "speed", "assign")
 WORLD_KEYS = ("link_delay", "link_jitter", "link_loss", "loss_burst", "wheel_slip",
               "encoder_noise", "detection_noise", "detection_dropout")
 KILL_KEYS = ("kill_share", "kill_at")
@@ -137,7 +137,7 @@ def parse_spec(doc: dict[str, Any], where: str, base: Path, source: Path | None 
                                     control_combos)
         for case in cases:
             for seed in seeds:
-                world_seed = derived_seed("world", seed, case)
+                world_seed = derived_seed("world", seed, _drawn(case))
                 killed = bool(np.random.default_rng([world_seed, 1]).random() < kill_share)
                 for (profile, _, robot), world, (control, _) in itertools.product(
                         profiles, world_combos, control_combos):
@@ -156,6 +156,14 @@ def parse_spec(doc: dict[str, Any], where: str, base: Path, source: Path | None 
     return CampaignSpec(name=name, doc=doc, runs=tuple(runs.values()), source=source,
                         profiles={name: path for name, path, _ in profiles},
                         checked_families=checked)
+
+
+def _drawn(case: Mapping[str, Any]) -> Mapping[str, Any]:
+    """The case as far as it is drawn: a family without ``assign``, so that both
+    assignments of a scene meet the same world (delays, losses, kill)."""
+    if "assign" not in case.get("family", {}):
+        return case
+    return {**case, "family": {k: v for k, v in case["family"].items() if k != "assign"}}
 
 
 # --- the parts of a spec ------------------------------------------------------------------

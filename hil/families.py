@@ -20,11 +20,12 @@ import numpy as np
 
 from agent.config import ControlParams
 from agent.formation import FormationKind, formation_offsets
+from hil.assignment import ASSIGN
 from hil.micro_cases import CASES
 from hil.scenario import ScenarioError
 from hil.scene import Scene
 
-FAMILY_KEYS = {"kind", "robots", "spacing", "slots", "field", "speed"}
+FAMILY_KEYS = {"kind", "robots", "spacing", "slots", "field", "speed", "assign"}
 MICRO_CASES = ("head_on_swap", "offset_head_on", "obstacle_ahead", "crowd_onto_obstacle",
                "narrow_gap", "through_own_reference", "late_arrival")
 KINDS = ("line", "wedge", "circle", "grid", "rotating_circle")
@@ -54,6 +55,7 @@ class Family:
     slots: str = "shuffled"
     field: str = "sparse"
     speed: float = 2.0        # m/s, of the formation's reference
+    assign: str = "listed"    # [formation] assign of the scenario (not in the seed)
 
     def name(self, seed: int) -> str:
         """e.g. ``grid-20-cluttered-shuffled-s7`` (spacing and speed when not default)."""
@@ -62,11 +64,15 @@ class Family:
             parts.append(f"sp{self.spacing:g}")
         if self.speed != Family.speed:
             parts.append(f"v{self.speed:g}")
+        if self.assign != Family.assign:
+            parts.append(self.assign)
         return "-".join(parts + [f"s{seed}"])
 
     def canonical(self) -> str:
-        """Stable text of the family, mixed into the seed."""
-        return ";".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self))
+        """Stable text of the family, mixed into the seed: the drawn scene, so without
+        ``assign`` (the same robots and slots, either assignment)."""
+        return ";".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
+                        if f.name != "assign")
 
 
 def parse_family(family: Mapping[str, Any], control: ControlParams = DEFAULT_CONTROL,
@@ -82,7 +88,8 @@ def parse_family(family: Mapping[str, Any], control: ControlParams = DEFAULT_CON
         if key not in FAMILY_KEYS:
             raise fail(str(key), f"unknown key; allowed: {', '.join(sorted(FAMILY_KEYS))}")
     d = Family()
-    for key, allowed in (("kind", KINDS), ("slots", SLOTS), ("field", FIELDS)):
+    for key, allowed in (("kind", KINDS), ("slots", SLOTS), ("field", FIELDS),
+                         ("assign", ASSIGN)):
         if family.get(key, getattr(d, key)) not in allowed:
             raise fail(key, f"expected one of {', '.join(allowed)}, got {family[key]!r}")
     robots = family.get("robots", d.robots)
@@ -100,7 +107,7 @@ def parse_family(family: Mapping[str, Any], control: ControlParams = DEFAULT_CON
                             f"got {speed!r}")
     return Family(kind=family.get("kind", d.kind), robots=robots, spacing=spacing,
                   slots=family.get("slots", d.slots), field=family.get("field", d.field),
-                  speed=speed)
+                  speed=speed, assign=family.get("assign", d.assign))
 
 
 def _number(table: Mapping[str, Any], key: str, default: float, fail: Any) -> float:
@@ -135,7 +142,10 @@ def family_doc(family: Mapping[str, Any], seed: int, control: ControlParams = DE
     catch up with their slots and still have speed left to go round what is in the way."""
     duration = _duration(duration, where)
     fam, scene, angle = family_scene(family, seed, control, where)
-    return scene.within(SLOT_SHARE * top_speed).rotated(angle).doc(fam.name(seed), duration)
+    doc = scene.within(SLOT_SHARE * top_speed).rotated(angle).doc(fam.name(seed), duration)
+    if fam.assign != Family.assign:
+        doc["formation"]["assign"] = fam.assign
+    return doc
 
 
 def family_scene(family: Mapping[str, Any], seed: int, control: ControlParams = DEFAULT_CONTROL,

@@ -7,7 +7,7 @@ Format (every field, with its unit and default, in docs/formats.md)::
     [control]                       # agent.config.ControlParams, all optional
     [robot]                         # agent.config.RobotParams, all optional
     [sim]                           # sensing_range (m, default 2c), substeps, plant
-    [formation]                     # kind, spacing, center0, velocity, omega, offsets
+    [formation]                     # kind, spacing, center0, velocity, omega, offsets, assign
     [[robots]]                      # id, pose = [x, y, theta], in formation order
     [[obstacles]]                   # center = [x, y], radius
     [world]                         # firmware_sim.world.WorldParams, optional (ideal)
@@ -18,7 +18,7 @@ Every problem is reported as :class:`ScenarioError` naming the file and the fiel
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,7 @@ from common.schema import ConfigError, TableReader, from_table, load_toml
 from firmware_sim.mocap_sim import MocapParams
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles, WorldParams
+from hil.assignment import ASSIGN, shortest_assignment
 
 
 class ScenarioError(ValueError):
@@ -102,7 +103,8 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
     for i, out in enumerate(mocap.outage if mocap is not None else ()):
         if out.robot not in ids:
             raise rd.fail(f"[mocap.outage][{i}].robot", f"no robot {out.robot} in [[robots]]")
-    formation = _formation(rd, rd.table(doc, "formation"), len(ids), control)
+    formation = _formation(rd, rd.table(doc, "formation"), np.array(poses).reshape(-1, 3),
+                           control)
 
     obs = rd.array_of_tables(doc, "obstacles", required=False)
     centers, radii = [], []
@@ -137,9 +139,16 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
                     source=source, robot_given="robot" in doc, mocap=mocap)
 
 
-def _formation(rd: TableReader, table: dict, n: int, control: ControlParams) -> Formation:
-    rd.only(table, {"kind", "spacing", "center0", "velocity", "omega", "offsets"},
+def _formation(rd: TableReader, table: dict, poses: np.ndarray,
+               control: ControlParams) -> Formation:
+    """The formation of robots starting at ``poses`` (N, 3), each robot with its listed
+    offset or, with ``assign = "shortest"``, the slot of :mod:`hil.assignment`."""
+    rd.only(table, {"kind", "spacing", "center0", "velocity", "omega", "offsets", "assign"},
             "[formation]")
+    n = len(poses)
+    assign = table.get("assign", ASSIGN[0])
+    if assign not in ASSIGN:
+        raise rd.fail("[formation] assign", f"expected one of {list(ASSIGN)}, got {assign!r}")
     try:
         kind = FormationKind(table.get("kind", "line"))
     except ValueError:
@@ -163,6 +172,10 @@ def _formation(rd: TableReader, table: dict, n: int, control: ControlParams) -> 
         center0=rd.vector2(table, "center0", "[formation] center0", default=(0.0, 0.0)),
         velocity=rd.vector2(table, "velocity", "[formation] velocity", default=(0.0, 0.0)),
         omega=rd.number(table, "omega", "[formation] omega", default=0.0))
+    if assign == "shortest" and n:
+        slots = np.array([formation.point(i, 0.0)[:2] for i in range(n)])
+        formation = replace(
+            formation, offsets=offsets[shortest_assignment(poses[:, :2], slots)])
     need = control.b + control.hysteresis
     if formation.min_spacing() <= need:
         raise rd.fail("[formation]", f"two places are {formation.min_spacing():.3g} m apart; "

@@ -168,6 +168,37 @@ def test_world_seed_and_kill_depend_on_the_seed_and_family_only(tmp_path, famili
     assert doc["control"]["hysteresis"] == run.description["control"]["hysteresis"]
 
 
+def test_both_assignments_of_a_scene_meet_the_same_world(tmp_path, families):
+    from hil.campaign_run import scenario_doc
+    from hil.campaign_spec import load_spec
+    from hil.scenario import parse_scenario
+    spec = load_spec(write_spec(tmp_path, """
+name = "assign"
+seeds = 4
+[[family]]
+kind = "circle"
+robots = 8
+assign = ["listed", "shortest"]
+[world]
+link_delay = 0.2
+kill_share = 0.5
+kill_at = [2.0, 4.0]
+"""))
+    assert len(spec.runs) == 8
+    pairs: dict[int, list] = {}
+    for r in spec.runs:
+        pairs.setdefault(r.description["seed"], []).append(r.description)
+    for listed, shortest in pairs.values():
+        assert [listed["family"]["assign"], shortest["family"]["assign"]] == \
+            ["listed", "shortest"]
+        assert listed["world"] == shortest["world"]
+        assert listed.get("kill_at") == shortest.get("kill_at")
+        a, b = scenario_doc(listed), scenario_doc(shortest)
+        assert a["robots"] == b["robots"] and b["formation"]["assign"] == "shortest"
+        fa, fb = (parse_scenario(d, "t").formation for d in (a, b))
+        assert sorted(fa.offsets.tolist()) == sorted(fb.offsets.tolist())
+
+
 def test_mocap_goes_to_the_runs_whose_odometry_is_wrong(tmp_path, families):
     """A spec's [mocap] is the pose source of the runs with wheel slip (their scenario
     gets it); the other runs keep their description, hence their keys and cached rows."""

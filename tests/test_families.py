@@ -172,6 +172,15 @@ def test_robot_count_and_slot_order(robots):
                for s in shuffled)
 
 
+def test_assign_keeps_the_scene_and_names_it():
+    listed = family_doc({"kind": "grid", "robots": 9}, 4)
+    shortest = family_doc({"kind": "grid", "robots": 9, "assign": "shortest"}, 4)
+    assert shortest["name"] == "grid-9-sparse-shuffled-shortest-s4"
+    assert shortest.pop("formation").pop("assign") == "shortest"
+    assert "assign" not in listed.pop("formation")
+    assert {**shortest, "name": listed["name"]} == listed
+
+
 @pytest.mark.parametrize("family, message", [
     ({"colour": "red"}, "colour: unknown key"),
     ({"kind": "blob"}, "kind: expected one of line, wedge"),
@@ -183,6 +192,7 @@ def test_robot_count_and_slot_order(robots):
     ({"spacing": "wide"}, "spacing: expected a finite number"),
     ({"slots": "random"}, "slots: expected one of sorted, shuffled"),
     ({"field": "dense"}, "field: expected one of sparse, cluttered, none"),
+    ({"assign": "nearest"}, "assign: expected one of listed, shortest"),
     ({"speed": -1.0}, "speed: expected"),
     ({"speed": 12.0}, "speed: expected"),
 ])

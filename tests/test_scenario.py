@@ -68,6 +68,8 @@ def test_minimal_scenario_gets_the_defaults(tmp_path):
      "b \\+ hysteresis"),
     (lambda t: t.replace('kind = "line"', 'kind = "offsets"\noffsets = [[0.0, 0.0]]'),
      r"\[formation\] offsets"),
+    (lambda t: t.replace('kind = "line"', 'kind = "line"\nassign = "nearest"'),
+     r"\[formation\] assign: expected one of \['listed', 'shortest'\], got 'nearest'"),
     (lambda t: t.replace('[[robots]]\nid = 1\npose = [0.0, 0.0, 0.0]\n[[robots]]\nid = 2\n'
                          'pose = [0.0, 5.0, 0.0]\n', ''), r"\[\[robots\]\]: missing"),
 ])
@@ -83,3 +85,16 @@ def test_unreadable_and_invalid_files(tmp_path):
         load_scenario(tmp_path / "nope.toml")
     with pytest.raises(ScenarioError, match="not valid TOML"):
         load_scenario(write(tmp_path, "name = \n"))
+
+
+def test_shortest_assignment_gives_each_robot_the_slot_of_least_squares(tmp_path):
+    """Robots 1 and 2 start beside each other's listed places: listed, their paths cross;
+    assigned, each takes the place in front of it, and the formation's places stay a set."""
+    text = MINIMAL.replace('kind = "line"', 'kind = "offsets"\noffsets = [[10.0, 5.0], '
+                           '[10.0, 0.0]]\nvelocity = [1.0, 0.0]')
+    listed = load_scenario(write(tmp_path, text, "a.toml")).formation
+    shortest = load_scenario(write(tmp_path, text.replace(
+        "velocity", 'assign = "shortest"\nvelocity'), "b.toml")).formation
+    assert listed.offsets.tolist() == [[10.0, 5.0], [10.0, 0.0]]
+    assert shortest.offsets.tolist() == [[10.0, 0.0], [10.0, 5.0]]
+    assert shortest.velocity == listed.velocity
