@@ -6,16 +6,27 @@ their slot's reference at t = 0 (CAPT, Turpin, Michael and Kumar 2014). No two r
 by swapping slots, so robots driving in step along straight lines to them stay at least
 1/sqrt(2) of the smaller of their start and slot separations apart; and the sum does not
 change when the formation translates, so the assignment holds for a formation in motion. It is made
-once, by whoever issues the mission (the scenario loader, for the batch simulator and the
-SITL); agents receive their offset as before.
+once, by whoever issues the mission: the scenario loader from the planned starts (for the
+batch simulator and the SITL), ``boundswarm mission`` from where the robots report they
+stand; agents receive their offset as before.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
+from agent.formation import Formation
+
 ASSIGN = ("listed", "shortest")
+
+
+def assigned(formation: Formation, starts: np.ndarray) -> Formation:
+    """``formation`` with its places (a set) given to the robots at ``starts`` (N, 2) [m],
+    in robot order, by :func:`shortest_assignment` against the places at t = 0."""
+    slots = np.array([formation.point(i, 0.0)[:2] for i in range(len(formation.offsets))])
+    return replace(formation, offsets=formation.offsets[shortest_assignment(starts, slots)])
 
 
 def shortest_assignment(starts: np.ndarray, slots: np.ndarray) -> np.ndarray:

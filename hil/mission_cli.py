@@ -3,11 +3,19 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 
 from hil.cli_options import Subparsers, add_zenoh_client_options, swarm_name, zenoh_client
 from hil.exit_codes import EXIT_OK
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from agent.formation import Formation
+    from hil.scenario import Scenario
+    from transport.zenoh_link import Keys
 
 REPEATS, REPEAT_PERIOD = 3, 0.2          # late subscribers get the mission too
 
@@ -24,7 +32,9 @@ def add_parser(sub: Subparsers) -> None:
 
 
 def run(args: argparse.Namespace, console: Console) -> int:
-    """Wait until every robot of the scenario is alive, then publish its mission."""
+    """Wait until every robot of the scenario is alive, then publish its mission; with
+    ``[formation] assign = "shortest"``, its places go to the robots by where they report
+    they stand (hil.assignment), not by the scenario's planned starts."""
     from common.payloads import MissionMsg
     from hil.processes import wait_until
     from hil.scenario import load_scenario
@@ -38,9 +48,13 @@ def run(args: argparse.Namespace, console: Console) -> int:
         if not wait_until(lambda: presence.alive() >= ids, args.wait):
             missing = sorted(ids - presence.alive())
             raise RuntimeError(f"robots {missing} are not alive after {args.wait:g} s")
+        formation = sc.formation
+        if sc.assign == "shortest":
+            formation = _assigned_where_they_stand(session, keys, sc, args.wait)
+            console.print("places assigned by the robots' reported positions")
         epoch = time.time() + args.start_in
-        msg = MissionMsg(1, time.time(), epoch, sc.formation.center0, sc.formation.velocity,
-                         sc.formation.omega, sc.ids, sc.formation.offsets)
+        msg = MissionMsg(1, time.time(), epoch, formation.center0, formation.velocity,
+                         formation.omega, sc.ids, formation.offsets)
         for _ in range(REPEATS):
             session.put(keys.mission, msg.encode())
             time.sleep(REPEAT_PERIOD)
@@ -50,3 +64,25 @@ def run(args: argparse.Namespace, console: Console) -> int:
     finally:
         session.close()
     return EXIT_OK
+
+
+def _assigned_where_they_stand(session: zenoh.Session, keys: Keys, sc: Scenario,
+                               wait: float) -> Formation:
+    """The scenario's formation, its places given to the robots by their latest states."""
+    import numpy as np
+
+    from common.payloads import StateMsg
+    from hil.assignment import assigned
+    from hil.processes import wait_until
+    from transport.zenoh_link import Latest
+    states = Latest(session, keys.state("*"), StateMsg.decode, time.time)
+    try:
+        ids = [int(i) for i in sc.ids]
+        if not wait_until(lambda: set(states.snapshot()) >= set(ids), wait):
+            missing = sorted(set(ids) - set(states.snapshot()))
+            raise RuntimeError(f"no state from robots {missing} after {wait:g} s: cannot "
+                               f"assign the places by where they stand")
+        snap = states.snapshot()
+        return assigned(sc.formation, np.array([[snap[i].msg.x, snap[i].msg.y] for i in ids]))
+    finally:
+        states.close()

@@ -18,7 +18,7 @@ Every problem is reported as :class:`ScenarioError` naming the file and the fiel
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +30,7 @@ from common.schema import ConfigError, TableReader, from_table, load_toml
 from firmware_sim.mocap_sim import MocapParams
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles, WorldParams
-from hil.assignment import ASSIGN, shortest_assignment
+from hil.assignment import ASSIGN, assigned
 
 
 class ScenarioError(ValueError):
@@ -54,6 +54,7 @@ class Scenario:
     source: Path | None = None
     robot_given: bool = False   # the file has a [robot] table (else RobotParams' defaults)
     mocap: MocapParams | None = None   # a simulated motion-capture system
+    assign: str = "listed"      # [formation] assign: how the places were given (hil.assignment)
 
 
 TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles",
@@ -136,7 +137,8 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
                     formation=formation, ids=np.array(ids, dtype=int),
                     poses=np.array(poses, dtype=float), obstacles=obstacles,
                     sensing_range=sensing, substeps=substeps, plant=plant, world=world,
-                    source=source, robot_given="robot" in doc, mocap=mocap)
+                    source=source, robot_given="robot" in doc, mocap=mocap,
+                    assign=rd.table(doc, "formation").get("assign", ASSIGN[0]))
 
 
 def _formation(rd: TableReader, table: dict, poses: np.ndarray,
@@ -173,9 +175,7 @@ def _formation(rd: TableReader, table: dict, poses: np.ndarray,
         velocity=rd.vector2(table, "velocity", "[formation] velocity", default=(0.0, 0.0)),
         omega=rd.number(table, "omega", "[formation] omega", default=0.0))
     if assign == "shortest" and n:
-        slots = np.array([formation.point(i, 0.0)[:2] for i in range(n)])
-        formation = replace(
-            formation, offsets=offsets[shortest_assignment(poses[:, :2], slots)])
+        formation = assigned(formation, poses[:, :2])
     need = control.b + control.hysteresis
     if formation.min_spacing() <= need:
         raise rd.fail("[formation]", f"two places are {formation.min_spacing():.3g} m apart; "
