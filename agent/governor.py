@@ -97,33 +97,50 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
 def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
                     turn_rate: float, age: float, trails: FloatSeq, a: float, accel: float,
                     half_base: float, top_speed: float, staleness: float, stop_time: float,
-                    wheel_top: float, speed_up: float, lag: float) -> tuple[float, float]:
-    """(full, half) of :func:`neighbour_hazard` for a neighbour reported at (x, y) = this
-    robot's position less (``rel_x``, ``rel_y``) [m], along ``heading`` [rad] at ``speed``
-    [m/s] and ``turn_rate`` [rad/s], ``age`` [s] ago; ``trails`` [m]: this robot's path
-    since each of len(trails) instants splitting the age evenly, the stamp first (the
-    other arguments as there and :func:`approach`).
+                    wheel_top: float, speed_up: float, lag: float
+                    ) -> tuple[float, float, float, float]:
+    """(full, half, east, north) for a neighbour reported at (x, y) = this robot's position
+    less (``rel_x``, ``rel_y``) [m], along ``heading`` [rad] at ``speed`` [m/s] and
+    ``turn_rate`` [rad/s], ``age`` [s] ago: the exclusion radii of :func:`neighbour_hazard`
+    of a disc centred (east, north) [m] from its reported position. ``trails`` [m]: this
+    robot's path since each of len(trails) instants splitting the age evenly, the stamp
+    first (the other arguments as there and :func:`approach`).
 
-    Heard from, the neighbour last acted at some time since its stamp: its travel toward
-    this robot grows with that time and this robot's path since shrinks, so the two are
-    paired over each split of the age (the travel to its end, the path from its start)
-    and the largest sum counts, not the sum of the largest (docs/controller.md A10)."""
+    Heard from, on wheels of finite ramp, the neighbour can be now within rho of the
+    segment from its reported position to where its report extrapolates to now
+    (:func:`approach`). That capsule is convex, so along a straight path this robot's
+    distance to it falls at most as fast as toward its point nearest this robot: the disc
+    is centred there, and the governor's cosine (:func:`speed_limits`) bounds the approach
+    of a neighbour that drives on beside this robot, which a disc round its old, reported
+    position does not (docs/controller.md A10). The neighbour last acted at some time
+    since its stamp, where its rho grows with that time and this robot's path since
+    shrinks: the two are paired over each split of the age (rho to its end, the path from
+    its start) and the largest sum counts. Where the all-round bound round the reported
+    position leaves more room, the disc keeps that room, still centred on the capsule's
+    nearest point; silent, the static disc round the reported position."""
     turn = half_base * abs(turn_rate)
     if age > staleness or math.isinf(accel):
         nearer = approach(rel_x, rel_y, heading, speed, turn_rate, age, accel, half_base,
                           speed_up, lag)
-        return neighbour_hazard(speed, turn, age, trails[0], a, accel, top_speed, staleness,
-                                stop_time, wheel_top, nearer, speed_up, lag)
-    half = -math.inf
+        full, half = neighbour_hazard(speed, turn, age, trails[0], a, accel, top_speed,
+                                      staleness, stop_time, wheel_top, nearer, speed_up, lag)
+        return full, half, 0.0, 0.0
+    around = reach = -math.inf
     splits = len(trails)
     for k in range(splits):
         until = age * (k + 1) / splits
-        nearer = approach(rel_x, rel_y, heading, speed, turn_rate, until, accel, half_base,
-                          speed_up, lag)
         _, h = neighbour_hazard(speed, turn, until, trails[k], a, accel, top_speed,
-                                staleness, stop_time, wheel_top, nearer, speed_up, lag)
-        half = max(half, h)
-    return -math.inf, half
+                                staleness, stop_time, wheel_top, math.inf, speed_up, lag)
+        around = max(around, h)
+        reach = max(reach, a + trails[k] + swerve(speed, turn_rate, until, accel, half_base,
+                                                  speed_up, lag))
+    ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
+    length2 = ex * ex + ey * ey
+    t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
+    ox, oy = rel_x - t * ex, rel_y - t * ey
+    off = math.sqrt(ox * ox + oy * oy)
+    room = max(off - reach, math.sqrt(rel_x * rel_x + rel_y * rel_y) - around)
+    return -math.inf, off - room, t * ex, t * ey
 
 
 def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
@@ -151,20 +168,30 @@ def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
     age = max(age, 0.0)
-    up = min(speed_up, accel)
     ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
     length2 = ex * ex + ey * ey
     t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
     ox, oy = rel_x - t * ex, rel_y - t * ey      # products, not ** (pow rounds otherwise)
     off = math.sqrt(ox * ox + oy * oy)
+    rho = swerve(speed, turn_rate, age, accel, half_base, speed_up, lag)
+    return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho
+
+
+def swerve(speed: float, turn_rate: float, age: float, accel: float, half_base: float,
+           speed_up: float = math.inf, lag: float = 0.0) -> float:
+    """rho [m] of :func:`approach` (same arguments): how far from the segment of its
+    report's extrapolation a neighbour can be ``age`` [s] after its stamp (inf: no bound)."""
+    if math.isinf(accel) or half_base <= 0.0:
+        return math.inf
+    age = max(age, 0.0)
+    up = min(speed_up, accel)
     age2 = age * age
     # the heading's departure from the reported one, integrated over the age [rad s]
     swing = (0.5 * abs(turn_rate) * age2 + accel * lag * lag * age / half_base
              + up * age2 * age / (6.0 * half_base))
-    rho = min(0.5 * accel * age2 + accel * lag * age + abs(speed) * swing,
-              0.5 * up * age2 + accel * lag * lag
-              + (abs(speed) + accel * lag + up * age) * swing)
-    return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho
+    return min(0.5 * accel * age2 + accel * lag * age + abs(speed) * swing,
+               0.5 * up * age2 + accel * lag * lag
+               + (abs(speed) + accel * lag + up * age) * swing)
 
 
 def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: float,

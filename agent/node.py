@@ -415,7 +415,7 @@ class Agent:
                  obs_y: list[float], obs_r: list[float], n_stale: int, now_w: float
                  ) -> tuple[list[float], list[float], list[float], list[float], list[float]]:
         """The safety governor's hazards (agent.governor) around ``pose``: every neighbour
-        heard from at its reported position, grown by its data's age, and the detected
+        heard from where it can be by now given its data's age, and the detected
         obstacles grown by a (``obs_*`` without their last ``n_stale`` entries: stale
         robots, which are among the neighbours); with a pose source, every radius also grown
         by this robot's position uncertainty."""
@@ -438,10 +438,11 @@ class Agent:
                 continue
             age = now_w - m.stamp
             trails = [self.trail.since(m.stamp + age * k / SPLITS) for k in range(SPLITS)]
-            full, half = neighbour_radii(-dx, -dy, m.theta, m.v, m.u, age, trails, disc[0],
-                                         disc[1], half_base, *disc[2:], *commit)
-            hx.append(m.x)
-            hy.append(m.y)
+            full, half, east, north = neighbour_radii(-dx, -dy, m.theta, m.v, m.u, age,
+                                                      trails, disc[0], disc[1], half_base,
+                                                      *disc[2:], *commit)
+            hx.append(m.x + east)
+            hy.append(m.y + north)
             hr.append(full + grow)
             hh.append(half + grow)
             hm.append(1.0 if age <= staleness else 0.0)

@@ -188,8 +188,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         need = max(need, m, k)
         if m > cap or k > cap:
             continue
-        # the governor's hazards: neighbours at their reported positions, grown by their
-        # data's age, and the detected obstacles; all grown by the robot's own position
+        # the governor's hazards: neighbours where they can be by now given their data's
+        # age, and the detected obstacles; all grown by the robot's own position
         # uncertainty (own[:, 3], with a pose source)
         grow = own[i, 3] if own.shape[1] > 3 else 0.0
         n_h = 0
@@ -203,14 +203,15 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 since = age * (SPLITS - piece) / SPLITS
                 ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
                 trails[piece] = path[step % ring, i] - path[(step - ago) % ring, i]
-            h_r[n_h], h_h[n_h] = neighbour_radii(x - view[j, 0], y - view[j, 1], view[j, 2],
-                                                 view[j, 3], view[j, 4], age, trails, a,
-                                                 p.accel, 0.5 * p.wheel_base, top_speed,
-                                                 staleness, stop_time, wheel_top,
-                                                 p.speed_up, lag)
-            h_r[n_h] += grow
-            h_h[n_h] += grow
-            h_x[n_h], h_y[n_h], h_m[n_h] = view[j, 0], view[j, 1], age <= staleness
+            full, half, east, north = neighbour_radii(x - view[j, 0], y - view[j, 1],
+                                                      view[j, 2], view[j, 3], view[j, 4],
+                                                      age, trails, a, p.accel,
+                                                      0.5 * p.wheel_base, top_speed,
+                                                      staleness, stop_time, wheel_top,
+                                                      p.speed_up, lag)
+            h_r[n_h], h_h[n_h] = full + grow, half + grow
+            h_x[n_h], h_y[n_h] = view[j, 0] + east, view[j, 1] + north
+            h_m[n_h] = age <= staleness
             n_h += 1
         if not truth:
             k = detect(i, step, seed, det_noise, det_dropout, k, o_x, o_y, o_r, o_k)

@@ -116,14 +116,41 @@ def test_pairing_the_neighbour_s_travel_with_this_robot_s_path_keeps_stops_apart
         walked.insert(0, walked[0] + math.dist(p[k], p[k - 1]))
     trails = [walked[round(steps * k / SPLITS)] for k in range(SPLITS)]
     now = p[-1]
-    full, half = neighbour_radii(now[0], now[1], 0.0, v, u, age, trails, A, ACCEL,
-                                 half_base, TOP, STALE, STOP, 8.0, math.inf, 0.0)
-    own = 0.5 * (math.hypot(*now) - half)
+    full, half, east, north = neighbour_radii(now[0], now[1], 0.0, v, u, age, trails, A,
+                                              ACCEL, half_base, TOP, STALE, STOP, 8.0,
+                                              math.inf, 0.0)
+    own = 0.5 * (math.dist(now, (east, north)) - half)
     assert full == -math.inf
     for k in range(steps + 1):
         theirs = 0.5 * (math.dist(q[k], p[k]) - A)
         if own >= 0.0 and theirs >= 0.0:
             assert math.dist(now, q[k]) - own - theirs >= A - 1e-6
+
+
+def test_a_neighbour_driving_on_beside_this_robot_is_met_where_it_is_now():
+    """Two fast robots driving on side by side, paths 13 degrees apart and closing, data
+    0.44 s old (from the realistic campaign with places assigned, where two such robots
+    collided): the neighbour's report lies behind this robot, so a disc round it is one
+    this robot drives away from, and its governor let it drive on. The disc is centred
+    where the neighbour's report extrapolates to (the capsule's point nearest this
+    robot, within it), and the governor brakes."""
+    age, speed, heading = 0.44, 5.9, 2.23                     # this robot, at the origin
+    v_n, heading_n, now_n = 5.1, 2.45, (2.79, 2.29)           # the neighbour, now
+    reported = (now_n[0] - v_n * age * math.cos(heading_n),
+                now_n[1] - v_n * age * math.sin(heading_n))
+    trails = [speed * age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
+    full, half, east, north = neighbour_radii(-reported[0], -reported[1], heading_n, v_n,
+                                              0.0, age, trails, 1.0, 6.0, 0.25, 6.0, 0.8,
+                                              0.13, 6.0, 6.0, 0.03)
+    centre = (reported[0] + east, reported[1] + north)
+    assert centre == pytest.approx(now_n, abs=1e-9)
+
+    def allowed(x, y):
+        return speed_limits(0.0, 0.0, heading, speed, 0.0, [x], [y], [full], [half], [1.0],
+                            6.0, 0.1, 0.03, 9.4, 0.5, 6.0, 0.0, 6.0)[0]
+
+    assert allowed(*centre) == 0.0                   # behind its braking curve: brake
+    assert allowed(*reported) > speed                # the report's own disc: drive on
 
 
 def test_a_neighbour_met_head_on_with_old_data_is_paired_with_this_robot_s_path():
@@ -133,12 +160,16 @@ def test_a_neighbour_met_head_on_with_old_data_is_paired_with_this_robot_s_path(
     age, speed = 0.5, 1.5
     trails = [speed * age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
     args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0)
-    _, paired = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trails, *args)
-    _, whole = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trails[:1], *args)
+
+    def room(trails):        # m, from this robot to the edge of the neighbour's disc
+        _, half, east, north = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trails,
+                                               *args)
+        return math.hypot(-6.0 - east, north) - half
+
     travel = min(approach(-6.0, 0.0, math.pi, speed, 0.0, age, ACCEL, 0.3),
                  speed * age + 0.5 * ACCEL * age * age)
-    assert whole == pytest.approx(A + travel + speed * age)     # 2.75 m
-    assert paired < whole - 0.5
+    assert room(trails[:1]) == pytest.approx(6.0 - (A + travel + speed * age))  # 2.75 m
+    assert room(trails) > room(trails[:1]) + 0.5
 
 
 @settings(max_examples=300, deadline=None)
