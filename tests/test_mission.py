@@ -15,16 +15,11 @@ from transport.zenoh_link import Keys, open_session, session_config
 SCENARIO = """
 name = "two"
 duration = 5.0
+robots = [{{id = 1, pose = [0.0, 0.0, 0.0]}}, {{id = 2, pose = [0.0, 5.0, 0.0]}}]
 [formation]
 kind = "offsets"
 offsets = [[10.0, 0.0], [10.0, 5.0]]
 {assign}
-[[robots]]
-id = 1
-pose = [0.0, 0.0, 0.0]
-[[robots]]
-id = 2
-pose = [0.0, 5.0, 0.0]
 """
 
 
