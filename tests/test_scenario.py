@@ -6,7 +6,7 @@ import pytest
 from hil.scenario import ScenarioError, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
-PAPER_POSES = Path(__file__).resolve().parents[2] / "shared" / "paper" / "paper-initial-poses.csv"
+PAPER_POSES = Path(__file__).resolve().parent / "data" / "paper-initial-poses.csv"   # the paper's
 
 MINIMAL = """
 name = "t"
@@ -36,9 +36,8 @@ def test_bundled_scenarios_load(path):
 
 def test_paper_scenario_holds_the_papers_example():
     sc = load_scenario(SCENARIOS / "paper.toml")
-    if PAPER_POSES.exists():
-        csv = np.loadtxt(PAPER_POSES, delimiter=",", skiprows=1)
-        assert np.allclose(sc.poses, csv[:, 1:]) and list(sc.ids) == list(csv[:, 0])
+    csv = np.loadtxt(PAPER_POSES, delimiter=",", skiprows=1)
+    assert np.allclose(sc.poses, csv[:, 1:]) and list(sc.ids) == list(csv[:, 0])
     assert sc.obstacles.centers.tolist() == [[0.0, -20.0], [15.0, -5.0]]
     assert sc.obstacles.radii.tolist() == [3.0, 4.0]
     p, _ = sc.formation.reference(1.0)
