@@ -75,13 +75,7 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
     speed, turn = abs(speed), abs(turn)
     silent = age > staleness
     age = min(max(age, 0.0), staleness)     # silent: it may have died as late as that
-    grow = top_speed * age
-    if not math.isinf(accel):
-        up = min(speed_up, accel)
-        # its wheels within a ramp of the command it reported for the lag, then its
-        # speed grown by at most speed_up since (or, more loosely, the ramp all along)
-        grow = min(grow, speed * age + min(0.5 * accel * age * age + accel * lag * age,
-                                           0.5 * up * age * age + accel * lag * lag))
+    grow = _travel(speed, age, accel, min(speed_up, accel), lag, top_speed)
     if not silent:
         return -math.inf, a + min(grow, nearer) + trail
     now, turn_now = top_speed, turn
@@ -92,6 +86,20 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
         # stop is at the fastest speed, the wheels as far apart as that leaves them
         turn_now = min(turn + accel * lag + up * age, max(wheel_top - now, 0.0))
     return a + grow + stopping(now, accel, stop_time, turn_now), -math.inf
+
+
+def _travel(speed: float, age: float, accel: float, up: float, lag: float,
+            top_speed: float) -> float:
+    """How far [m] a neighbour last reported at ``speed`` [m/s] (>= 0) can have travelled
+    ``age`` [s] (>= 0) later, all round (arguments as :func:`neighbour_hazard`, ``up`` its
+    speed-up at most ``accel``)."""
+    grow = top_speed * age
+    if not math.isinf(accel):
+        # its wheels within a ramp of the command it reported for the lag, then its
+        # speed grown by at most speed_up since (or, more loosely, the ramp all along)
+        grow = min(grow, speed * age + min(0.5 * accel * age * age + accel * lag * age,
+                                           0.5 * up * age * age + accel * lag * lag))
+    return grow
 
 
 def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
@@ -127,11 +135,10 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
         return full, half, 0.0, 0.0
     around = reach = -math.inf
     splits = len(trails)
+    fast, up = abs(speed), min(speed_up, accel)
     for k in range(splits):
-        until = age * (k + 1) / splits
-        _, h = neighbour_hazard(speed, turn, until, trails[k], a, accel, top_speed,
-                                staleness, stop_time, wheel_top, math.inf, speed_up, lag)
-        around = max(around, h)
+        until = max(age * (k + 1) / splits, 0.0)
+        around = max(around, a + _travel(fast, until, accel, up, lag, top_speed) + trails[k])
         reach = max(reach, a + trails[k] + swerve(speed, turn_rate, until, accel, half_base,
                                                   speed_up, lag))
     ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
