@@ -126,12 +126,12 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     its start) and the largest sum counts. Where the all-round bound round the reported
     position leaves more room, the disc keeps that room, still centred on the capsule's
     nearest point; silent, the static disc round the reported position."""
-    turn = half_base * abs(turn_rate)
     if age > staleness or math.isinf(accel):
         nearer = approach(rel_x, rel_y, heading, speed, turn_rate, age, accel, half_base,
                           speed_up, lag)
-        full, half = neighbour_hazard(speed, turn, age, trails[0], a, accel, top_speed,
-                                      staleness, stop_time, wheel_top, nearer, speed_up, lag)
+        full, half = neighbour_hazard(speed, half_base * abs(turn_rate), age, trails[0], a,
+                                      accel, top_speed, staleness, stop_time, wheel_top,
+                                      nearer, speed_up, lag)
         return full, half, 0.0, 0.0
     around = reach = -math.inf
     splits = len(trails)
@@ -141,13 +141,22 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
         around = max(around, a + _travel(fast, until, accel, up, lag, top_speed) + trails[k])
         reach = max(reach, a + trails[k] + swerve(speed, turn_rate, until, accel, half_base,
                                                   speed_up, lag))
+    east, north, off = _nearest_on_report(rel_x, rel_y, heading, speed, age)
+    room = max(off - reach, math.sqrt(rel_x * rel_x + rel_y * rel_y) - around)
+    return -math.inf, off - room, east, north
+
+
+def _nearest_on_report(rel_x: float, rel_y: float, heading: float, speed: float,
+                       age: float) -> tuple[float, float, float]:
+    """(east, north, off): the point [m] from a neighbour's reported position, on the
+    segment its report extrapolates along over ``age`` [s] (``speed`` [m/s] along
+    ``heading`` [rad]), nearest the point (``rel_x``, ``rel_y``) [m], and its distance
+    [m] from that point."""
     ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
     length2 = ex * ex + ey * ey
     t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
-    ox, oy = rel_x - t * ex, rel_y - t * ey
-    off = math.sqrt(ox * ox + oy * oy)
-    room = max(off - reach, math.sqrt(rel_x * rel_x + rel_y * rel_y) - around)
-    return -math.inf, off - room, t * ex, t * ey
+    ox, oy = rel_x - t * ex, rel_y - t * ey      # products, not ** (pow rounds otherwise)
+    return t * ex, t * ey, math.sqrt(ox * ox + oy * oy)
 
 
 def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
@@ -175,11 +184,7 @@ def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
     age = max(age, 0.0)
-    ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
-    length2 = ex * ex + ey * ey
-    t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
-    ox, oy = rel_x - t * ex, rel_y - t * ey      # products, not ** (pow rounds otherwise)
-    off = math.sqrt(ox * ox + oy * oy)
+    _, _, off = _nearest_on_report(rel_x, rel_y, heading, speed, age)
     rho = swerve(speed, turn_rate, age, accel, half_base, speed_up, lag)
     return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho
 

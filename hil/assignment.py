@@ -1,14 +1,14 @@
-"""Which robot takes which slot: the formation's slots as a set (docs/formation.md).
+"""Which robot takes which slot: the formation's slots as a set (docs/formats.md).
 
 A scenario lists one offset per robot; with ``[formation] assign = "shortest"`` the robots
 instead take the slots that minimise the sum of the squared distances from their start to
 their slot's reference at t = 0 (CAPT, Turpin, Michael and Kumar 2014). No two robots gain
 by swapping slots, so robots driving in step along straight lines to them stay at least
 1/sqrt(2) of the smaller of their start and slot separations apart; and the sum does not
-change when the formation translates, so the assignment holds for a formation in motion. It is made
-once, by whoever issues the mission: the scenario loader from the planned starts (for the
-batch simulator and the SITL), ``boundswarm mission`` from where the robots report they
-stand; agents receive their offset as before.
+change when the formation translates, so the assignment holds for a formation in motion.
+It is made once, by whoever issues the mission: the scenario loader from the planned
+starts (for the batch simulator and the SITL), ``boundswarm mission`` from where the
+robots report they stand; agents receive their offset as before.
 """
 from __future__ import annotations
 

@@ -159,11 +159,12 @@ def parse_spec(doc: dict[str, Any], where: str, base: Path, source: Path | None 
 
 
 def _drawn(case: Mapping[str, Any]) -> Mapping[str, Any]:
-    """The case as far as it is drawn: a family without ``assign``, so that both
-    assignments of a scene meet the same world (delays, losses, kill)."""
-    if "assign" not in case.get("family", {}):
-        return case
-    return {**case, "family": {k: v for k, v in case["family"].items() if k != "assign"}}
+    """The case as far as it is drawn: a family without the keys that leave its scene as
+    it is (``hil.families.NOT_DRAWN``), so that such variants of a scene meet the same
+    world (delays, losses, kill)."""
+    family = case.get("family", {})
+    kept = {k: v for k, v in family.items() if k not in families_module().NOT_DRAWN}
+    return case if len(kept) == len(family) else {**case, "family": kept}
 
 
 # --- the parts of a spec ------------------------------------------------------------------

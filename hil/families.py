@@ -26,6 +26,7 @@ from hil.scenario import ScenarioError
 from hil.scene import Scene
 
 FAMILY_KEYS = {"kind", "robots", "spacing", "slots", "field", "speed", "assign"}
+NOT_DRAWN = frozenset({"assign"})   # family keys that leave the drawn scene as it is
 MICRO_CASES = ("head_on_swap", "offset_head_on", "obstacle_ahead", "crowd_onto_obstacle",
                "narrow_gap", "through_own_reference", "late_arrival")
 KINDS = ("line", "wedge", "circle", "grid", "rotating_circle")
@@ -72,7 +73,7 @@ class Family:
         """Stable text of the family, mixed into the seed: the drawn scene, so without
         ``assign`` (the same robots and slots, either assignment)."""
         return ";".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
-                        if f.name != "assign")
+                        if f.name not in NOT_DRAWN)
 
 
 def parse_family(family: Mapping[str, Any], control: ControlParams = DEFAULT_CONTROL,

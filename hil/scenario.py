@@ -104,8 +104,8 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
     for i, out in enumerate(mocap.outage if mocap is not None else ()):
         if out.robot not in ids:
             raise rd.fail(f"[mocap.outage][{i}].robot", f"no robot {out.robot} in [[robots]]")
-    formation = _formation(rd, rd.table(doc, "formation"), np.array(poses).reshape(-1, 3),
-                           control)
+    starts = np.array(poses, dtype=float).reshape(-1, 3)
+    formation, assign = _formation(rd, rd.table(doc, "formation"), starts, control)
 
     obs = rd.array_of_tables(doc, "obstacles", required=False)
     centers, radii = [], []
@@ -135,16 +135,16 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
 
     return Scenario(name=name, duration=duration, control=control, robot=robot,
                     formation=formation, ids=np.array(ids, dtype=int),
-                    poses=np.array(poses, dtype=float), obstacles=obstacles,
+                    poses=starts, obstacles=obstacles,
                     sensing_range=sensing, substeps=substeps, plant=plant, world=world,
-                    source=source, robot_given="robot" in doc, mocap=mocap,
-                    assign=rd.table(doc, "formation").get("assign", ASSIGN[0]))
+                    source=source, robot_given="robot" in doc, mocap=mocap, assign=assign)
 
 
 def _formation(rd: TableReader, table: dict, poses: np.ndarray,
-               control: ControlParams) -> Formation:
+               control: ControlParams) -> tuple[Formation, str]:
     """The formation of robots starting at ``poses`` (N, 3), each robot with its listed
-    offset or, with ``assign = "shortest"``, the slot of :mod:`hil.assignment`."""
+    offset or, with ``assign = "shortest"``, the slot of :mod:`hil.assignment`; and that
+    ``assign``."""
     rd.only(table, {"kind", "spacing", "center0", "velocity", "omega", "offsets", "assign"},
             "[formation]")
     n = len(poses)
@@ -181,4 +181,4 @@ def _formation(rd: TableReader, table: dict, poses: np.ndarray,
         raise rd.fail("[formation]", f"two places are {formation.min_spacing():.3g} m apart; "
                                      f"they must be more than b + hysteresis = {need:g} m "
                                      f"apart or the robots never stop avoiding each other")
-    return formation
+    return formation, assign
