@@ -93,13 +93,42 @@ def _travel(speed: float, age: float, accel: float, up: float, lag: float,
     """How far [m] a neighbour last reported at ``speed`` [m/s] (>= 0) can have travelled
     ``age`` [s] (>= 0) later, all round (arguments as :func:`neighbour_hazard`, ``up`` its
     speed-up at most ``accel``)."""
-    grow = top_speed * age
-    if not math.isinf(accel):
-        # its wheels within a ramp of the command it reported for the lag, then its
-        # speed grown by at most speed_up since (or, more loosely, the ramp all along)
-        grow = min(grow, speed * age + min(0.5 * accel * age * age + accel * lag * age,
-                                           0.5 * up * age * age + accel * lag * lag))
-    return grow
+    if math.isinf(accel):
+        return top_speed * age
+    return _paired((0.0,), age, speed, 0.0, 0.0, accel, 0.0, top_speed, up, lag)[0]
+
+
+def _paired(trails: FloatSeq, age: float, speed: float, turn_rate: float, a: float,
+            accel: float, half_base: float, top_speed: float, up: float, lag: float
+            ) -> tuple[float, float]:
+    """(around, reach) [m] of a neighbour heard from on wheels of finite ``accel``
+    (arguments as :func:`neighbour_radii`, ``up`` its speed-up at most ``accel``): over the
+    splits of the ``age`` (>= 0) paired with this robot's ``trails``, the largest of a +
+    how far it can have travelled all round + the trail, and of a + the trail + rho
+    (:func:`swerve`; inf when ``half_base`` <= 0). Both formulas are written here once, in
+    one loop, as the agent runs it for every neighbour every period."""
+    around = reach = -math.inf
+    splits = len(trails)
+    speed, half_turn = abs(speed), 0.5 * abs(turn_rate)
+    half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
+    accel_lag2 = accel_lag * lag
+    for k in range(splits):
+        t = max(age * (k + 1) / splits, 0.0)
+        # travel: its wheels within a ramp of the command it reported for the lag, then
+        # its speed grown by at most up since (or, more loosely, the ramp all along)
+        grow = min(top_speed * t, speed * t + min(half_accel * t * t + accel_lag * t,
+                                                  half_up * t * t + accel_lag2))
+        around = max(around, a + grow + trails[k])
+        rho = math.inf
+        if half_base > 0.0:
+            t2 = t * t
+            # the heading's departure from the reported one, integrated over t [rad s]
+            swing = (half_turn * t2 + accel_lag2 * t / half_base
+                     + up * t2 * t / (6.0 * half_base))
+            rho = min(half_accel * t2 + accel_lag * t + speed * swing,
+                      half_up * t2 + accel_lag2 + (speed + accel_lag + up * t) * swing)
+        reach = max(reach, a + trails[k] + rho)
+    return around, reach
 
 
 def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
@@ -133,14 +162,8 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
                                       accel, top_speed, staleness, stop_time, wheel_top,
                                       nearer, speed_up, lag)
         return full, half, 0.0, 0.0
-    around = reach = -math.inf
-    splits = len(trails)
-    fast, up = abs(speed), min(speed_up, accel)
-    for k in range(splits):
-        until = max(age * (k + 1) / splits, 0.0)
-        around = max(around, a + _travel(fast, until, accel, up, lag, top_speed) + trails[k])
-        reach = max(reach, a + trails[k] + swerve(speed, turn_rate, until, accel, half_base,
-                                                  speed_up, lag))
+    around, reach = _paired(trails, age, speed, turn_rate, a, accel, half_base, top_speed,
+                            min(speed_up, accel), lag)
     east, north, off = _nearest_on_report(rel_x, rel_y, heading, speed, age)
     room = max(off - reach, math.sqrt(rel_x * rel_x + rel_y * rel_y) - around)
     return -math.inf, off - room, east, north
@@ -195,15 +218,8 @@ def swerve(speed: float, turn_rate: float, age: float, accel: float, half_base: 
     report's extrapolation a neighbour can be ``age`` [s] after its stamp (inf: no bound)."""
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
-    age = max(age, 0.0)
-    up = min(speed_up, accel)
-    age2 = age * age
-    # the heading's departure from the reported one, integrated over the age [rad s]
-    swing = (0.5 * abs(turn_rate) * age2 + accel * lag * lag * age / half_base
-             + up * age2 * age / (6.0 * half_base))
-    return min(0.5 * accel * age2 + accel * lag * age + abs(speed) * swing,
-               0.5 * up * age2 + accel * lag * lag
-               + (abs(speed) + accel * lag + up * age) * swing)
+    return _paired((0.0,), age, speed, turn_rate, 0.0, accel, half_base, math.inf,
+                   min(speed_up, accel), lag)[1]
 
 
 def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: float,

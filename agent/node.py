@@ -437,7 +437,7 @@ class Agent:
             if rid == me or dx * dx + dy * dy > reach * reach:
                 continue
             age = now_w - m.stamp
-            trails = [self.trail.since(m.stamp + age * k / SPLITS) for k in range(SPLITS)]
+            trails = self.trail.since_each(m.stamp, age, SPLITS)
             full, half, east, north = neighbour_radii(-dx, -dy, m.theta, m.v, m.u, age,
                                                       trails, disc[0], disc[1], half_base,
                                                       *disc[2:], *commit)

@@ -34,7 +34,14 @@ class Trail:
     def since(self, t: float) -> float:
         """The path [m] from the last position recorded at or before t [s] (the first
         one, if none) to the newest (0 before any)."""
-        if not self._path:
-            return 0.0
-        k = max(bisect_right(self._t, t) - 1, 0)
-        return self._path[-1] - self._path[k]
+        return self.since_each(t, 0.0, 1)[0]
+
+    def since_each(self, start: float, span: float, pieces: int) -> list[float]:
+        """:meth:`since` at each of the instants start + span k / pieces [s], k = 0 ..
+        pieces - 1 (one call for the splits of a neighbour's data age)."""
+        t, path = self._t, self._path
+        if not path:
+            return [0.0] * pieces
+        last = path[-1]
+        return [last - path[max(bisect_right(t, start + span * k / pieces) - 1, 0)]
+                for k in range(pieces)]

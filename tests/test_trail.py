@@ -29,3 +29,13 @@ def test_it_keeps_its_span_and_no_more():
     trail.record(10.0, 9.99, 3.0)
     assert trail.since(9.99) == pytest.approx(3.0)
     assert not math.isnan(trail.since(0.0))
+
+
+def test_the_paths_since_the_splits_of_an_age_are_those_since_each_instant():
+    trail = Trail(span=1.0)
+    assert trail.since_each(0.0, 0.3, 4) == [0.0] * 4    # nothing recorded yet
+    for k, (x, y) in enumerate([(0, 0), (3, 4), (3, 4), (6, 8), (6, 0)]):
+        trail.record(0.1 * k, x, y)
+    assert trail.since_each(0.05, 0.3, 3) == [trail.since(0.05), trail.since(0.15),
+                                              trail.since(0.25)]
+    assert trail.since_each(0.05, 0.3, 3) == pytest.approx([18.0, 13.0, 13.0])
