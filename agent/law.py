@@ -137,6 +137,8 @@ class LawMemory(NamedTuple):
     radius: float = 0.0         # m
     wheel_r: float = 0.0        # rev/s, the right wheel's last set-point
     wheel_l: float = 0.0        # rev/s, the left wheel's
+    passing: int = 0            # side a neighbour in the way is passed on (A13): -1 its
+                                # right, +1 its left, 0 none in the way
 
 
 def moved_estimate(mem: LawMemory, dx: float, dy: float) -> LawMemory:
@@ -278,10 +280,14 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         mode = AVOID
         ff = 0.0
 
-    # TRACK: pass the nearest neighbour in the way on its right, b + hysteresis off
+    # TRACK: pass the nearest neighbour in the way b + hysteresis off, on its right; on its
+    # left, the shorter way, when the right leads toward another neighbour within b +
+    # hysteresis and the left into no neighbour's cone, and then on the left until no
+    # neighbour is in the way (A13)
+    passing_side = 0
     if mode == TRACK and p.sidestep:
         passing, within = p.b + p.hysteresis, min(p.c, D)
-        nearest, heading = within, theta_d
+        nearest, phi_in, cone_in = within, 0.0, 0.0
         for j in range(n_nbr):
             dx, dy = nbr_x[j] - x, nbr_y[j] - y
             d = math.sqrt(dx * dx + dy * dy)
@@ -289,9 +295,15 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
                 phi = math.atan2(dy, dx)
                 cone = HALF_PI if d <= passing else math.asin(passing / d)
                 if abs(wrap_angle(theta_d - phi)) < cone:
-                    nearest, heading = d, phi - cone
+                    nearest, phi_in, cone_in = d, phi, cone
         if nearest < within:
-            theta_d, ff = heading, 0.0
+            passing_side = 1 if mem.passing > 0 or (
+                wrap_angle(theta_d - phi_in) > 0.0
+                and in_a_cone(phi_in - cone_in, x, y, nbr_x, nbr_y, nearest, passing,
+                              passing)
+                and not in_a_cone(phi_in + cone_in, x, y, nbr_x, nbr_y, nearest, passing,
+                                  within)) else -1
+            theta_d, ff = phi_in + passing_side * cone_in, 0.0
 
     speed = p.K * min(p.D_max, dist)
     if mode == TRACK and not math.isinf(p.accel):
@@ -360,4 +372,20 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         wl = min(max(wl, -p.speed_limit), p.speed_limit)
         v, u = body_velocity(TWO_PI * wr, TWO_PI * wl, p.wheel_radius, p.wheel_base)
     return v, u, mode, governed, LawMemory(ex, ey, True, avoiding, side, center_x, center_y,
-                                           radius, wr, wl)
+                                           radius, wr, wl, passing_side)
+
+
+def in_a_cone(heading: float, x: float, y: float, nbr_x: FloatSeq, nbr_y: FloatSeq,
+              skip: float, passing: float, within: float) -> bool:
+    """Whether ``heading`` [rad] from (x, y) [m] is in the cone of passing (A13) of a
+    neighbour nearer than ``within`` [m] other than the one ``skip`` [m] away (the one
+    being passed): within asin(``passing`` / d) of the bearing to it, or less than 90
+    degrees off it within ``passing``."""
+    for j in range(len(nbr_x)):
+        dx, dy = nbr_x[j] - x, nbr_y[j] - y
+        d = math.sqrt(dx * dx + dy * dy)
+        if EPS < d < within and d != skip:
+            cone = HALF_PI if d <= passing else math.asin(passing / d)
+            if abs(wrap_angle(heading - math.atan2(dy, dx))) < cone:
+                return True
+    return False

@@ -156,8 +156,8 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     law_seconds = 0.0
     reach = max(control.v_max, robot.v_wheel_max) * T   # m, farthest move per period
 
-    mem_f, mem_i = np.zeros((n, 7)), np.zeros((n, 3), np.int64)
-    new_f, new_i = np.zeros((n, 7)), np.zeros((n, 3), np.int64)
+    mem_f, mem_i = np.zeros((n, 7)), np.zeros((n, 4), np.int64)
+    new_f, new_i = np.zeros((n, 7)), np.zeros((n, 4), np.int64)
     cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
     held, new_held = np.full((n, cap + 1), -1, np.int64), np.full((n, cap + 1), -1, np.int64)
     cmd, ref, near = np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 2))

@@ -243,7 +243,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                                            motion[1], motion[2], motion[3], motion[4], t)
         mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
                         mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4], mem_f[i, 5],
-                        mem_f[i, 6])
+                        mem_f[i, 6], mem_i[i, 3])
         # the pairs active last period (per-pair hysteresis); held lists are short
         for q in range(m):
             nbr_h[q] = 0.0
@@ -264,6 +264,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         out_mem_f[i, 5], out_mem_f[i, 6] = new.wheel_r, new.wheel_l
         out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
                                                              int(new.avoiding), new.side)
+        out_mem_i[i, 3] = new.passing
         w = 0
         for q in range(m):
             dx, dy = nbr_x[q] - x, nbr_y[q] - y
@@ -318,7 +319,7 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
     stale neighbour is an obstacle of :func:`agent.governor.silent_radius`). Memory of
     :class:`LawMemory` as floats (N, 7): prev_ex, prev_ey, center_x, center_y, radius,
     wheel_r, wheel_l, and
-    ints (N, 3): has_prev, avoiding, side; held (N, cap + 1) the indices of the robots
+    ints (N, 4): has_prev, avoiding, side, passing; held (N, cap + 1) the indices of the robots
     each robot's pairs with which were active (:func:`agent.law.pair_active`), -1 ending
     the list; offsets (N, 2) [m] and motion (5,) = centre0 x,
     y [m], velocity x, y [m/s], omega [rad/s] of the formation; obs (K, 3) = obstacle

@@ -245,6 +245,29 @@ def test_track_passes_a_neighbour_in_the_way_on_its_right():
     assert paper.u[0] == pytest.approx(0.0)
 
 
+def test_track_passes_on_the_left_when_its_right_leads_toward_a_neighbour_beside_it():
+    """A neighbour 3.8 m ahead in the way to a reference a little left of it, another 2.35 m
+    off on the right, a little behind (within b + hysteresis, out of the way): the right
+    edge of the cone of passing leads toward that one and the left edge toward none, so the
+    robot heads asin((b + hysteresis)/3.8) to the left and keeps the left (the law's
+    memory) while a neighbour is in its way, even once its right is clear; with its
+    reference right of the neighbour in the way, or nothing beside it, it passes on the
+    right."""
+    cone = math.asin((P.b + P.hysteresis) / 3.8)
+    ahead, beside = (3.8, 0.0), (-0.5, -2.3)
+    left = step(single([0, 0, 0], [20, 1], nbrs=[ahead, beside]))
+    assert left.mode[0] == Mode.TRACK and left.memory.passing == 1
+    assert left.u[0] == pytest.approx(P.K_theta * cone)
+    kept = step(single([0, 0, 0], [20, 1], nbrs=[ahead]), mem=left.memory)
+    assert kept.memory.passing == 1 and kept.u[0] == pytest.approx(P.K_theta * cone)
+    for case in (single([0, 0, 0], [20, -1], nbrs=[ahead, beside]),
+                 single([0, 0, 0], [20, 1], nbrs=[ahead])):
+        right = step(case)
+        assert right.memory.passing == -1 and right.u[0] == pytest.approx(-P.K_theta * cone)
+    clear = step(single([0, 0, 0], [20, 1], nbrs=[(-3.0, 0.0)]), mem=left.memory)
+    assert clear.memory.passing == 0                      # none in the way: side forgotten
+
+
 @pytest.mark.parametrize("nbr", [(1.0, 3.0), (5.0, 0.0), (-3.0, 0.0)])
 def test_track_does_not_sidestep_a_neighbour_out_of_the_way(nbr):
     """Outside the cone of passing, farther than c, or behind: the paper's heading."""

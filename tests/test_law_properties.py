@@ -48,7 +48,7 @@ def cases(draw):
         wheels = st.floats(-6.0, 6.0)
         mem = LawMemory(*draw(point), True, draw(st.booleans()),
                         draw(st.sampled_from([-1, 0, 1])), *centre[0], centre[1],
-                        draw(wheels), draw(wheels))
+                        draw(wheels), draw(wheels), draw(st.sampled_from([-1, 0, 1])))
     hazards = [(q[0], q[1], -math.inf, P.a, 1.0) for q in nbrs] + \
         [(o[0][0], o[0][1], o[1] + P.a, -math.inf, 0.0) for o in obs]
     held = [float(draw(st.booleans())) for _ in nbrs]
