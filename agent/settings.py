@@ -8,6 +8,7 @@
     autostart = true                # arm and follow the mission without a ground station
     realtime_priority = 0           # 1..99: the loop thread runs SCHED_FIFO at it, Zenoh's
                                     # threads one below (0: normal scheduling)
+    align_ticks = true              # ticks on multiples of the period in UNIX time
     [control]                       # agent.config.ControlParams (period = loop period)
     [robot]                         # agent.config.RobotParams (wheels, driver limits)
     [can]                           # transport.settings.CanSettings
@@ -80,6 +81,10 @@ class AgentSettings:
     autostart: bool = setting(False, doc="arm and follow the mission without a ground station")
     realtime_priority: int = setting(0, doc="SCHED_FIFO priority of the loop thread, Zenoh's "
                                      "threads one below (0: normal scheduling)", lo=0, hi=99)
+    align_ticks: bool = setting(True, doc="the loop ticks on multiples of the period in UNIX "
+                                "time, so robots with synchronised clocks tick together and "
+                                "their states reach the network as one burst (false: from "
+                                "the agent's start)")
     control: ControlParams = section(ControlParams, "controller gains and limits")
     robot: RobotParams = section(RobotParams, "wheels and driver limits")
     can: CanSettings = section(CanSettings, "the robot's CAN bus")

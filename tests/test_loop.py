@@ -43,6 +43,30 @@ def test_overrun_skips_missed_ticks_instead_of_catching_up():
     assert loop.stats.summary()["overruns_unlogged"] == 2 and loop.stats.overruns == 5
 
 
+def test_aligned_loops_tick_together_on_the_wall_clock_grid():
+    """Two robots whose loops start at different instants, each on its own monotonic clock
+    (synchronised wall clocks): with align, every tick's UNIX time is a multiple of the
+    period, so both tick at the same instants; without, at their start's phase."""
+    period = 0.02
+    walls = {}
+    for name, start, offset, align in (("a", 1000.0, 1.7e9 + 0.0031, True),
+                                        ("b", 52.3377, 1.7e9 + 947.6654, True),
+                                        ("c", 52.3377, 1.7e9 + 947.6654, False)):
+        clock = SimClock(start, offset)
+        loop = FixedRateLoop(period, clock, align=align)
+        walls[name] = []
+        loop.run(lambda k, d, seen=walls[name], clock=clock: seen.append(clock.wall()),
+                 max_ticks=50)
+    for name in ("a", "b"):
+        phase = [round(w / period) * period - w for w in walls[name]]
+        assert max(map(abs, phase)) < 1e-6, name
+    assert walls["a"][0] > 1.7e9 + 1000.0031 - 1e-9          # never before the start
+    assert walls["a"][0] - (1.7e9 + 1000.0031) < period
+    c_phase = walls["c"][0] % period
+    assert c_phase == pytest.approx((1.7e9 + 947.6654 + 52.3377) % period)
+    assert min(c_phase, period - c_phase) > 1e-3               # not on the grid
+
+
 def test_stop_from_inside_a_tick():
     clock = SimClock()
     loop = FixedRateLoop(0.01, clock)
