@@ -1,10 +1,10 @@
 """A fixed-period loop on a monotonic clock with absolute deadlines.
 
-Theory of operation: the k-th tick is due at start + k * period. With ``align``, start is the
-first instant whose UNIX time is a multiple of the period: loops on synchronised clocks (one
-machine, or robots under NTP/PTP) tick together, so every robot publishes its state at about
-the same instant, the network carries the swarm's states as one burst per period (Zenoh
-batches them), and each state is used one period after it was sent. After a tick the loop sleeps
+Theory of operation: the k-th tick is due at start + k * period. With a ``phase``, start is
+the first instant whose UNIX time is a multiple of the period plus the phase: loops on
+synchronised clocks (one machine, or robots under chrony/PTP) with the same phase tick
+together, so their states reach the network as one burst per period (Zenoh batches them)
+and each is used one period after it was sent. After a tick the loop sleeps
 until the next deadline that is still in the future; if a tick ran past one or more
 deadlines, those ticks are skipped (never caught up in a burst) and counted as overruns.
 The clock and the sleep are injected, so tests run the loop on simulated time.
@@ -95,16 +95,19 @@ class LoopStats:
 
 
 class FixedRateLoop:
-    """Calls ``tick(k, deadline)`` every ``period`` seconds until ``stop()``; with ``align``
-    the ticks fall on multiples of the period in UNIX time (from the clock's wall time when
-    the loop starts: a later step of the wall clock shifts them until the next start)."""
+    """Calls ``tick(k, deadline)`` every ``period`` seconds until ``stop()``; with a
+    ``phase`` [s] the ticks fall at UNIX times n * period + phase (read from the clock's wall
+    time when the loop starts: a later step of the wall clock shifts them until the next
+    start); None: at the phase of the start."""
 
-    def __init__(self, period: float, clock: Clock, align: bool = False):
+    def __init__(self, period: float, clock: Clock, phase: float | None = None):
         if not (period > 0 and math.isfinite(period)):
             raise ValueError(f"loop period must be a positive number of seconds, got {period!r}")
+        if phase is not None and not 0.0 <= phase < period:
+            raise ValueError(f"loop phase must be in [0, period {period:g} s), got {phase!r}")
         self.period = period
         self.clock = clock
-        self.align = align
+        self.phase = phase
         self.stats = LoopStats(period)
         self._running = False
 
@@ -115,8 +118,8 @@ class FixedRateLoop:
     def run(self, tick: Callable[[int, float], None], max_ticks: int | None = None) -> None:
         self._running = True
         start = self.clock.monotonic()
-        if self.align:
-            start += -self.clock.wall() % self.period
+        if self.phase is not None:
+            start += (self.phase - self.clock.wall()) % self.period
         k = 0
         while self._running and (max_ticks is None or self.stats.ticks < max_ticks):
             deadline = start + k * self.period

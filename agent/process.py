@@ -110,7 +110,7 @@ def run_agent(settings: AgentSettings, stats_path: Path | None = None,
         link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
                          clock.wall, params=CONTROL_PARAMS)
         realtime = rt > 0 and use_realtime(rt)
-        loop = FixedRateLoop(s.control.period, clock, align=s.align_ticks)
+        loop = FixedRateLoop(s.control.period, clock, s.tick_phase if s.align_ticks else None)
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: loop.stop())
         # autostart arms once the pose can be trusted (at once without a pose source)

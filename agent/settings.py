@@ -8,7 +8,8 @@
     autostart = true                # arm and follow the mission without a ground station
     realtime_priority = 0           # 1..99: the loop thread runs SCHED_FIFO at it, Zenoh's
                                     # threads one below (0: normal scheduling)
-    align_ticks = true              # ticks on multiples of the period in UNIX time
+    align_ticks = true              # ticks at UNIX times n * period + tick_phase
+    tick_phase = 0.0                # s, 0 <= tick_phase < [control] period
     [control]                       # agent.config.ControlParams (period = loop period)
     [robot]                         # agent.config.RobotParams (wheels, driver limits)
     [can]                           # transport.settings.CanSettings
@@ -81,10 +82,12 @@ class AgentSettings:
     autostart: bool = setting(False, doc="arm and follow the mission without a ground station")
     realtime_priority: int = setting(0, doc="SCHED_FIFO priority of the loop thread, Zenoh's "
                                      "threads one below (0: normal scheduling)", lo=0, hi=99)
-    align_ticks: bool = setting(True, doc="the loop ticks on multiples of the period in UNIX "
-                                "time, so robots with synchronised clocks tick together and "
-                                "their states reach the network as one burst (false: from "
-                                "the agent's start)")
+    align_ticks: bool = setting(True, doc="the loop ticks at UNIX times n * period + "
+                                "tick_phase, so robots with synchronised clocks tick together "
+                                "and their states reach the network as one burst (false: at "
+                                "the phase of the agent's start)")
+    tick_phase: float = setting(0.0, unit="s", doc="the ticks' offset from multiples of the "
+                                "period (below the period; with align_ticks)", lo=0.0)
     control: ControlParams = section(ControlParams, "controller gains and limits")
     robot: RobotParams = section(RobotParams, "wheels and driver limits")
     can: CanSettings = section(CanSettings, "the robot's CAN bus")
@@ -111,6 +114,9 @@ class AgentSettings:
         if any(ch in self.swarm for ch in "/*$?#"):
             raise ConfigError(f"AgentSettings.swarm: must not contain / * $ ? #, "
                               f"got {self.swarm!r}")
+        if self.tick_phase >= self.control.period:
+            raise ConfigError(f"tick_phase: must be below the period ({self.control.period:g} "
+                              f"s), got {self.tick_phase:g}")
         if self.timeouts.feedback < 2 * self.control.period:
             raise ConfigError(f"[timeouts] feedback: must be at least two periods "
                               f"({2 * self.control.period:g} s), got {self.timeouts.feedback:g}")

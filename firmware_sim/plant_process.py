@@ -144,9 +144,9 @@ def _run_plant(session, keys: Keys, robots: list[PlantRobot], scenario, dt: floa
                       index=_scenario_index(scenario), mocap=mocap)
     if not scenario.world.ideal:
         log.warning("imperfect world: %s", scenario.world)
-    # on the agents' grid (their ticks fall on multiples of their period in UNIX time, and so
-    # do these steps): truth, detections and the agents' states reach the router together
-    loop = FixedRateLoop(dt, clock, align=True)
+    # on the agents' grid (their ticks fall on multiples of their period in UNIX time plus
+    # their phase, these steps on multiples of dt): truth and detections go out with them
+    loop = FixedRateLoop(dt, clock, phase=0.0)
     _stop_on_signals(loop.stop)
     if realtime_priority:
         use_realtime(realtime_priority)

@@ -138,7 +138,9 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
     # agents on a slow link are configured not to take live neighbours for silent ones
     timeouts = TimeoutSettings()
     timeouts = dataclasses.replace(timeouts, staleness=w.staleness(timeouts.staleness))
+    groups = opts.launch.tick_groups
     return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=(x, y, theta),
+                         tick_phase=(index % groups) * sc.control.period / groups,
                          control=sc.control, robot=sc.robot, can=can, timeouts=timeouts,
                          zenoh=ZenohSettings(mode="client", connect=(endpoint,),
                                              near_radius=opts.near_radius),

@@ -44,16 +44,18 @@ def test_overrun_skips_missed_ticks_instead_of_catching_up():
 
 
 def test_aligned_loops_tick_together_on_the_wall_clock_grid():
-    """Two robots whose loops start at different instants, each on its own monotonic clock
-    (synchronised wall clocks): with align, every tick's UNIX time is a multiple of the
-    period, so both tick at the same instants; without, at their start's phase."""
+    """Robots whose loops start at different instants, each on its own monotonic clock
+    (synchronised wall clocks): with phase 0, every tick's UNIX time is a multiple of the
+    period, so they tick at the same instants; with another phase, that much later; without
+    one, at their start's phase."""
     period = 0.02
     walls = {}
-    for name, start, offset, align in (("a", 1000.0, 1.7e9 + 0.0031, True),
-                                        ("b", 52.3377, 1.7e9 + 947.6654, True),
-                                        ("c", 52.3377, 1.7e9 + 947.6654, False)):
+    for name, start, offset, phase in (("a", 1000.0, 1.7e9 + 0.0031, 0.0),
+                                        ("b", 52.3377, 1.7e9 + 947.6654, 0.0),
+                                        ("c", 52.3377, 1.7e9 + 947.6654, None),
+                                        ("d", 52.3377, 1.7e9 + 947.6654, 0.01)):
         clock = SimClock(start, offset)
-        loop = FixedRateLoop(period, clock, align=align)
+        loop = FixedRateLoop(period, clock, phase)
         walls[name] = []
         loop.run(lambda k, d, seen=walls[name], clock=clock: seen.append(clock.wall()),
                  max_ticks=50)
@@ -65,6 +67,13 @@ def test_aligned_loops_tick_together_on_the_wall_clock_grid():
     c_phase = walls["c"][0] % period
     assert c_phase == pytest.approx((1.7e9 + 947.6654 + 52.3377) % period)
     assert min(c_phase, period - c_phase) > 1e-3               # not on the grid
+    assert max(abs((w - 0.01) % period - period / 2) for w in walls["d"]) > period / 2 - 1e-6
+
+
+def test_a_phase_outside_the_period_is_refused():
+    for phase in (-0.001, 0.02, 0.5):
+        with pytest.raises(ValueError, match="phase"):
+            FixedRateLoop(0.02, SimClock(), phase)
 
 
 def test_stop_from_inside_a_tick():

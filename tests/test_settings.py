@@ -104,6 +104,8 @@ def test_every_settings_survive_the_toml_round_trip(s):
     ({"mavlink": {"origin": [0.0, 200.0, 0.0]}}, r"\[mavlink\]: MavlinkSettings.origin: longi"),
     ({"motors": {}}, r"robot.toml: unknown field\(s\) motors"),
     ({"realtime_priority": 100}, "realtime_priority: must be <= 99"),
+    ({"tick_phase": 0.02}, r"tick_phase: must be below the period \(0.02 s\), got 0.02"),
+    ({"tick_phase": -0.001}, r"tick_phase: must be >= 0"),
     ({"zenoh": {"near_radius": 2.0}}, r"\[zenoh\] near_radius: must be 0 or at least"),
 ])
 def test_bad_fields_are_named(change, field):
