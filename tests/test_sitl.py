@@ -19,6 +19,7 @@ from helpers import alive, free_port, judge_liveness
 from common.payloads import MissionMsg
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
+from hil.recorder import read_messages
 from hil.robot_profile import load_robot_profile
 from hil.run_folder import read_run
 from hil.scenario import load_scenario
@@ -118,6 +119,18 @@ def test_sitl_paper_scenario(launch):
     assert m["converged"] and m["convergence_time"] <= 12.0, out
     assert sum(s["watchdog_trips"].values()) == 0, s["watchdog_trips"]
     assert s["truth_gap"]["seconds"] < 0.1, s["truth_gap"]
+    # the agents tick on the wall-clock grid in two groups half a period apart: each state
+    # is stamped at its tick's start, a little after the phase (its jitter)
+    T = sc.control.period
+    phases: dict[int, list[float]] = {}
+    for _, kind, _, msg in read_messages(run.out / "run.mcap"):
+        if kind == "state":
+            phases.setdefault(msg["robot_id"], []).append((msg["stamp"] % T) * 1e3)
+    for index, rid in enumerate(sc.ids):
+        assert f"tick_phase = {(index % 2) * T / 2}" in (
+            run.out / "config" / f"robot_{rid}.toml").read_text()
+        late = (np.median(phases[int(rid)]) - (index % 2) * T / 2 * 1e3) % (T * 1e3)
+        assert late < 5.0, (rid, late)           # ms after its phase, mostly at once
     # settled (a second after convergence: at that instant a robot may still be closing in,
     # a little earlier or later than in the batch), each robot within 0.5 m of the batch
     # simulation of the same robot (its wheels, which make the law follow the reference's
