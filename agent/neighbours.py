@@ -77,6 +77,11 @@ def in_range(states: Iterable[NeighbourState], x: float, y: float, now: float,
     out = InRange()
     for i, m in enumerate(states):
         age = now - m.stamp
+        # out of reach wherever its arc took it (an arc is at least as long as its chord;
+        # a micrometre for rounding): not moved at all
+        travel = 0.0 if age > staleness else abs(m.v) * max(age, 0.0)
+        if math.hypot(m.x - x, m.y - y) - travel > reach + 1e-6:
+            continue
         px, py, stale = extrapolate(m.x, m.y, m.theta, m.v, m.u, age, staleness)
         if math.hypot(px - x, py - y) <= reach:
             if stale:

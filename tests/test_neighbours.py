@@ -56,3 +56,35 @@ def test_only_neighbours_within_reach_after_extrapolation():
     got = in_range([moving_away, closing, stale_far, stale_near], 0.0, 0.0, 10.0, 0.5, 3.0)
     assert fresh(got) == [pytest.approx((-2.95, 0.0))]
     assert stale(got) == [pytest.approx((0.0, 2.5))]
+
+
+def test_the_reach_test_is_on_the_extrapolated_position_whatever_the_shortcut():
+    """Robots far out of reach are passed over without moving them along their arcs; the
+    outcome is that of moving every one and testing its distance, also for robots whose arc
+    ends right at the reach (a chord is never longer than its arc)."""
+    import random
+
+    from agent.neighbours import extrapolate
+    rng = random.Random(7)
+    for _ in range(300):
+        x, y, now, staleness, reach = rng.uniform(-5, 5), rng.uniform(-5, 5), 100.0, 0.5, 6.0
+        states = []
+        for i in range(20):
+            age = rng.choice([rng.uniform(-0.05, 0.6), 0.5, 0.0])
+            states.append(state(now - age, x + rng.uniform(-12, 12), y + rng.uniform(-12, 12),
+                                rng.uniform(-4, 4), rng.uniform(-6, 6), rng.uniform(-3, 3), i))
+        # and one whose arc ends exactly at the reach, from beyond it
+        m = states[0]
+        px, py, _ = extrapolate(m.x, m.y, m.theta, m.v, m.u, now - m.stamp, staleness)
+        d = math.hypot(px - x, py - y)
+        if d > 0:
+            states[0] = state(m.stamp, m.x + (x - px) * (1 - reach / d),
+                              m.y + (y - py) * (1 - reach / d), m.theta, m.v, m.u, 0)
+        got = in_range(states, x, y, now, staleness, reach)
+        want_fresh, want_stale = [], []
+        for m in states:
+            px, py, is_stale = extrapolate(m.x, m.y, m.theta, m.v, m.u, now - m.stamp,
+                                           staleness)
+            if math.hypot(px - x, py - y) <= reach:
+                (want_stale if is_stale else want_fresh).append((px, py))
+        assert fresh(got) == want_fresh and stale(got) == want_stale
