@@ -82,6 +82,7 @@ class AgentCounters:
         ages = np.asarray(self.neighbour_age) * 1e3
         return {"ticks": self.ticks, "failsafes": self.failsafes,
                 "nonfinite_commands": self.nonfinite_commands,
+                "law_steps": self.law_steps, "governed": self.governed,
                 "governor_share": self.governed / self.law_steps if self.law_steps else 0.0,
                 "governor_min_allowed": (self.governor_min_allowed
                                          if math.isfinite(self.governor_min_allowed) else None),

@@ -125,6 +125,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     metrics["world"] = dataclasses.asdict(sc.world)
     metrics["mocap"] = dataclasses.asdict(sc.mocap) if sc.mocap is not None else None
     metrics["pose_error"] = extra["pose_error"]
+    metrics.update(governor_from_agents(swarm.agent_stats))
     metrics["sitl"] = _sitl_metrics(swarm, extra["epoch"], sc.duration,
                                     time.perf_counter() - started)
     metrics["sitl"]["truth_gap"] = gap = extra["truth_gap"]
@@ -223,6 +224,20 @@ def describe_stage(worst: dict) -> str:
     if stage is None:
         return "an unknown stage (no router timestamps)"
     return f"{STAGE_NAMES[stage]}, {worst['stage_tail_ms'][stage]:.0f} ms on average"
+
+
+def governor_from_agents(agent_stats: dict) -> dict[str, Any]:
+    """The governor's share of the periods in which the law ran (in all and per robot id)
+    and the least speed it allowed [m/s], as the agents counted them (the recording has no
+    allowed speed); agents without statistics (killed) are left out."""
+    counts = {int(r): st["agent"] for r, st in agent_stats.items() if "law_steps" in st["agent"]}
+    steps = sum(c["law_steps"] for c in counts.values())
+    allowed = [c["governor_min_allowed"] for c in counts.values()
+               if c["governor_min_allowed"] is not None]
+    return {"governor_share": (sum(c["governed"] for c in counts.values()) / steps
+                               if steps else 0.0),
+            "governor_share_by_robot": {r: c["governor_share"] for r, c in sorted(counts.items())},
+            "governor_min_allowed": min(allowed) if allowed else None}
 
 
 def worst_age(agent_stats: dict) -> dict | None:

@@ -491,6 +491,11 @@ def test_sitl_kills_the_planned_agent_and_reports_the_others(tmp_path):
         assert m["collisions"] == 0, text
         assert s["watchdog_trips"]["2"] >= 1
         assert s["agents_reporting"] == 2                          # no clean exit for robot 2
+        # the governor's figures are the surviving agents' own counts
+        for rid in ("1", "3"):
+            mine = json.loads((out / "logs" / f"agent_{rid}.json").read_text())["agent"]
+            assert m["governor_share_by_robot"][rid] == mine["governor_share"]
+        assert set(m["governor_share_by_robot"]) == {"1", "3"}
         # the impaired link: every surviving agent lost states and saw them late
         for rid in ("1", "3"):
             assert s["impairment"][rid]["lost"] > 0, s["impairment"]
