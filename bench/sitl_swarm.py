@@ -23,7 +23,10 @@ duration) and, apart, outside it (start-up and shut-down).
 ``--repeat`` pairs per size, and ends with the medians of both and their ratios: on a shared
 machine only figures measured interleaved compare. ``--sitl-args`` go to this checkout's
 ``boundswarm sitl`` only (e.g. a variant of its data path). The machine's load average is
-printed before and after each run.
+printed before and after each run. A shared VM's host can change its speed by half within
+minutes, and a small pure-Python loop does not show it (its time stays put while the swarm
+slows); the plant's share does (the same work in every run of a size: at 30 robots 13 % of
+a core in fast phases, 17–20 % in slow ones), so compare runs of similar plant shares.
 """
 from __future__ import annotations
 
