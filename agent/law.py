@@ -287,14 +287,14 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     passing_side = 0
     if mode == TRACK and p.sidestep:
         passing, within = p.b + p.hysteresis, min(p.c, D)
-        nearest, phi_in, cone_in = in_the_way(theta_d, x, y, nbr_x, nbr_y, -1.0, passing,
-                                              within)
+        nearest, phi_in, cone_in, j_in = in_the_way(theta_d, x, y, nbr_x, nbr_y, -1,
+                                                    passing, within)
         if nearest < within:
             passing_side = 1 if mem.passing > 0 or (
                 wrap_angle(theta_d - phi_in) > 0.0
-                and in_the_way(phi_in - cone_in, x, y, nbr_x, nbr_y, nearest, passing,
+                and in_the_way(phi_in - cone_in, x, y, nbr_x, nbr_y, j_in, passing,
                                passing)[0] < passing
-                and in_the_way(phi_in + cone_in, x, y, nbr_x, nbr_y, nearest, passing,
+                and in_the_way(phi_in + cone_in, x, y, nbr_x, nbr_y, j_in, passing,
                                within)[0] >= within) else -1
             theta_d, ff = phi_in + passing_side * cone_in, 0.0
 
@@ -369,19 +369,21 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
 
 
 def in_the_way(heading: float, x: float, y: float, nbr_x: FloatSeq, nbr_y: FloatSeq,
-               skip: float, passing: float, within: float) -> tuple[float, float, float]:
-    """(d [m], bearing [rad], half-width [rad]) of the cone of passing (A13) of the
+               skip: int, passing: float, within: float) -> tuple[float, float, float, int]:
+    """(d [m], bearing [rad], half-width [rad], index) of the cone of passing (A13) of the
     nearest neighbour within ``within`` [m] whose cone holds ``heading`` [rad], seen from
     (x, y) [m]: the bearings within asin(``passing`` / d) of the one to it, or all within
-    90 degrees of it nearer than ``passing``. The one ``skip`` [m] away (the one being
-    passed; -1: none) is left out; d = ``within`` when none is in the way."""
-    nearest, phi_in, cone_in = within, 0.0, 0.0
+    90 degrees of it nearer than ``passing``. Neighbour ``skip`` (the one being passed; -1:
+    none) is left out; d = ``within`` and index -1 when none is in the way."""
+    nearest, phi_in, cone_in, j_in = within, 0.0, 0.0, -1
     for j in range(len(nbr_x)):
+        if j == skip:
+            continue
         dx, dy = nbr_x[j] - x, nbr_y[j] - y
         d = math.sqrt(dx * dx + dy * dy)
-        if EPS < d < nearest and d != skip:
+        if EPS < d < nearest:
             phi = math.atan2(dy, dx)
             cone = HALF_PI if d <= passing else math.asin(passing / d)
             if abs(wrap_angle(heading - phi)) < cone:
-                nearest, phi_in, cone_in = d, phi, cone
-    return nearest, phi_in, cone_in
+                nearest, phi_in, cone_in, j_in = d, phi, cone, j
+    return nearest, phi_in, cone_in, j_in

@@ -229,8 +229,8 @@ def describe_stage(worst: dict) -> str:
 def governor_from_agents(agent_stats: dict) -> dict[str, Any]:
     """The governor's share of the periods in which the law ran (in all and per robot id)
     and the least speed it allowed [m/s], as the agents counted them (the recording has no
-    allowed speed); agents without statistics (killed) are left out."""
-    counts = {int(r): st["agent"] for r, st in agent_stats.items() if "law_steps" in st["agent"]}
+    allowed speed); a killed agent wrote no statistics and is not among them."""
+    counts = {int(r): st["agent"] for r, st in agent_stats.items()}
     steps = sum(c["law_steps"] for c in counts.values())
     allowed = [c["governor_min_allowed"] for c in counts.values()
                if c["governor_min_allowed"] is not None]
