@@ -1,7 +1,8 @@
 """SITL swarm timing at 50 Hz for growing swarms (prints a table).
 
     .venv/bin/python bench/sitl_swarm.py [--sizes 9 18 30 50] [--duration 15] [--near-radius 9]
-                                     [--realtime-priority 10] [--repeat 3] [--against REV]
+                                     [--realtime-priority 10] [--repeat 3]
+                                     [--against REV | --against-python EXE]
                                      [--sitl-args "--router-threads 1"]
 
 Each size runs ``boundswarm sitl`` on a grid formation (spacing 5 m, no obstacles) whose
@@ -20,6 +21,8 @@ outcome. Misses are the agents' overruns in the mission (t = 0 ..
 duration) and, apart, outside it (start-up and shut-down).
 
 ``--against REV`` runs REV's launcher (a temporary git worktree) and this checkout's in turn,
+and ``--against-python EXE`` this checkout under another interpreter (e.g. another venv's
+``bin/python``; that venv needs the project installed) and under this one in turn,
 ``--repeat`` pairs per size, and ends with the medians of both and their ratios: on a shared
 machine only figures measured interleaved compare. ``--sitl-args`` go to this checkout's
 ``boundswarm sitl`` only (e.g. a variant of its data path). The machine's load average is
@@ -96,14 +99,28 @@ def process_cpu(out: Path) -> dict[str, float]:
     return total
 
 
+def interpreter(python: str) -> str:
+    """``python``'s version and whether it runs with a shared libpython (slower: docs/
+    performance.md, "The interpreter")."""
+    probe = ("import platform, sys; maps = open('/proc/self/maps').read(); "
+             "print(platform.python_version(), sys._base_executable, "
+             "'shared' if 'libpython' in maps else 'static')")
+    try:
+        out = subprocess.run([python, "-c", probe], capture_output=True, text=True, timeout=30,
+                             check=True).stdout.split()
+    except (OSError, subprocess.SubprocessError) as exc:
+        sys.exit(f"cannot run the interpreter {python}: {exc}")
+    return f"Python {out[0]} ({out[1]}, {out[2]} libpython)"
+
+
 def run_once(n: int, args: argparse.Namespace, tmp: Path, checkout: Path,
-             extra: list[str]) -> tuple[dict, dict] | str:
-    """One SITL run of ``n`` robots with ``checkout``'s code and ``extra`` arguments:
-    (metrics, steady CPU shares in the mission) or why not."""
+             extra: list[str], python: str) -> tuple[dict, dict] | str:
+    """One SITL run of ``n`` robots with ``checkout``'s code, ``extra`` arguments and the
+    interpreter ``python``: (metrics, steady CPU shares in the mission) or why not."""
     sc = tmp / f"bench{n}.toml"
     sc.write_text(scenario_text(n, args.duration))
     out = tmp / "run"
-    cmd = [sys.executable, "-m", "hil.cli", "sitl", str(sc), "--out", str(out), "--no-live",
+    cmd = [python, "-m", "hil.cli", "sitl", str(sc), "--out", str(out), "--no-live",
            "--near-radius", str(args.near_radius),
            "--realtime-priority", str(args.realtime_priority), *extra]
     proc = subprocess.Popen(cmd, cwd=checkout, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
@@ -193,25 +210,34 @@ def main() -> None:
                         help="agents' near radius [m] (0: full-rate states of every robot)")
     parser.add_argument("--against", metavar="REV",
                         help="also run REV's launcher, alternately with this checkout's")
+    parser.add_argument("--against-python", metavar="EXE",
+                        help="also run this checkout under the interpreter EXE, alternately")
     parser.add_argument("--sitl-args", default="",
                         help="further arguments of this checkout's boundswarm sitl")
     args = parser.parse_args()
     args.lead = 1.5                        # s, the launcher's mission lead time
     # SIGTERM as Ctrl-C: the run in progress and REV's worktree are ended on the way out
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
+    if args.against and args.against_python:
+        parser.error("--against and --against-python compare one thing at a time")
+    print(f"this: {interpreter(sys.executable)}", flush=True)
+    if args.against_python:
+        print(f"python: {interpreter(args.against_python)}", flush=True)
     print(HEADER, flush=True)
     with (worktree(args.against) if args.against else contextlib.nullcontext()) as other:
-        runs = [("this", ROOT, shlex.split(args.sitl_args))]
+        runs = [("this", ROOT, shlex.split(args.sitl_args), sys.executable)]
         if other is not None:
-            runs.insert(0, (short(args.against), other, []))
+            runs.insert(0, (short(args.against), other, [], sys.executable))
+        if args.against_python:
+            runs.insert(0, ("python", ROOT, shlex.split(args.sitl_args), args.against_python))
         for n in args.sizes:
-            worst: dict[str, list[float]] = {label: [] for label, _, _ in runs}
+            worst: dict[str, list[float]] = {label: [] for label, *_ in runs}
             clean = dict.fromkeys(worst, 0)
             for _ in range(args.repeat):
-                for label, checkout, extra in runs:
+                for label, checkout, extra, python in runs:
                     before = load()
                     with tempfile.TemporaryDirectory() as tmp:
-                        got = run_once(n, args, Path(tmp), checkout, extra)
+                        got = run_once(n, args, Path(tmp), checkout, extra, python)
                     loads = f"{before}/{load()}"
                     if isinstance(got, str):
                         print(f"{label:>9} {n:>6} {got} (load {loads})", flush=True)
@@ -224,7 +250,7 @@ def main() -> None:
                 print(f"{label:>9} {n:>6} robots: {clean[label]} of {args.repeat} runs without "
                       f"a missed period in the mission; worst agent's age p99, median "
                       f"{pct(worst[label], 50):.1f} ms of {worst[label]}", flush=True)
-            if other is not None and worst["this"] and worst[runs[0][0]]:
+            if len(runs) > 1 and worst["this"] and worst[runs[0][0]]:
                 print(f"{'':>9} {n:>6} robots: worst age p99, this / {runs[0][0]}: "
                       f"{pct(worst['this'], 50) / pct(worst[runs[0][0]], 50):.2f}", flush=True)
 

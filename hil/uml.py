@@ -211,10 +211,29 @@ def _extract_deb(data: bytes, dest: Path) -> None:
         body = data[pos + 60:pos + 60 + size]
         if name.startswith("data.tar"):
             with tarfile.open(fileobj=io.BytesIO(body)) as tar:
-                tar.extractall(dest, filter="tar")
+                _extract_within(tar, dest)
             return
         pos += 60 + size + (size & 1)
     raise ValueError("Debian package without data.tar")
+
+
+def _extract_within(tar: tarfile.TarFile, dest: Path) -> None:
+    """Extract ``tar`` into ``dest`` with tarfile's "tar" filter: leading slashes stripped,
+    a member whose path would land outside ``dest`` (following the links extracted before
+    it) refused. Where the Python predates the filters (3.11.2, Debian 12's), the same check
+    here, member by member."""
+    if hasattr(tarfile, "tar_filter"):
+        try:
+            tar.extractall(dest, filter="tar")
+        except tarfile.FilterError as exc:
+            raise ValueError(f"{exc} (would be extracted outside {dest})") from None
+        return
+    root = os.path.realpath(dest)
+    for member in tar:
+        member.name = member.name.lstrip("/")
+        if os.path.commonpath([root, os.path.realpath(os.path.join(root, member.name))]) != root:
+            raise ValueError(f"{member.name!r} would be extracted outside {dest}")
+        tar.extract(member, root)
 
 
 def fetch(dest: Path = LOCAL, suite: str = SUITE, mirror: str | None = None) -> Path:
