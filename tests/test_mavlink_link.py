@@ -26,7 +26,13 @@ from agent.process import AgentVehicle
 from agent.settings import AgentSettings
 from common.schema import ConfigError, Param, from_table
 from common.vocabulary import AgentMode
-from transport.mavlink_io import TcpTransport, UdpTransport, open_transport
+from transport.mavlink_io import (
+    MAX_DATAGRAM,
+    OUT_BUFFER,
+    TcpTransport,
+    UdpTransport,
+    open_transport,
+)
 from transport.mavlink_link import (
     MAX_READS,
     CustomMode,
@@ -245,6 +251,58 @@ def test_telemetry_rates_frames_and_conversions(make_rig):
     home = last["HOME_POSITION"]                          # where the robot was at start
     assert (home.x, home.y, home.z) == pytest.approx((y, x, 0.0))
     assert (home.latitude, home.longitude) == (gp.lat, gp.lon)
+
+
+def test_a_poll_sends_its_telemetry_as_one_datagram_every_tenth_of_a_second():
+    """All streams fall on the same polls and leave as one datagram of whole frames."""
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    link = MavlinkLink(open_transport(f"udpout:127.0.0.1:{gcs.getsockname()[1]}"),
+                       FakeVehicle(), ROBOT)
+    parser = mav2.MAVLink(None)
+    try:
+        per_poll = []
+        for k in range(50):                               # 1 s at 50 Hz
+            link.poll(100.0 + k * STEP)
+            datagrams = []
+            while select.select([gcs], [], [], 0.0)[0]:
+                datagrams.append(gcs.recv(65535))
+            per_poll.append([[m.get_type() for m in parser.parse_buffer(d) or []]
+                             for d in datagrams])
+    finally:
+        link.close()
+        gcs.close()
+    sending = [k for k, d in enumerate(per_poll) if d]
+    assert sending == list(range(0, 50, 5))               # every fifth poll, from the first
+    assert all(len(per_poll[k]) == 1 for k in sending)    # one datagram each
+    assert sorted(per_poll[0][0]) == sorted(
+        ["HEARTBEAT", "LOCAL_POSITION_NED", "ATTITUDE", "GLOBAL_POSITION_INT", "SYS_STATUS",
+         "GPS_GLOBAL_ORIGIN", "HOME_POSITION"])
+    assert sorted(per_poll[5][0]) == ["ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"]
+
+
+def test_udp_flush_packs_whole_frames_into_datagrams_up_to_the_mtu():
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    out = UdpTransport("127.0.0.1", gcs.getsockname()[1], listen=False)
+    try:
+        frames = [bytes([k]) * 280 for k in range(12)]    # MAVLink 2's largest frame
+        for f in frames:
+            out.write(f)
+        assert not select.select([gcs], [], [], 0.05)[0]  # nothing leaves before a flush
+        out.flush()
+        got = []
+        while select.select([gcs], [], [], 0.2)[0]:
+            got.append(gcs.recv(65535))
+        assert [len(d) for d in got] == [5 * 280, 5 * 280, 2 * 280]    # 1472 bytes at most
+        assert b"".join(got) == b"".join(frames)          # in order, none cut
+        assert max(map(len, got)) <= MAX_DATAGRAM and out.dropped == 0
+        for _ in range(OUT_BUFFER // 280 + 5):            # not flushed: the buffer is bounded
+            out.write(bytes(280))
+        assert out.dropped == 5
+    finally:
+        out.close()
+        gcs.close()
 
 
 def test_heartbeat_follows_mode_and_failsafe(make_rig):

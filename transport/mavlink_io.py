@@ -8,11 +8,13 @@
     tcp:HOST:PORT       connect to a TCP server; while down, retry every RECONNECT_S
     DEVICE[,BAUD]       a serial port (POSIX), e.g. /dev/ttyUSB0,57600 (default 57600 baud)
 
-Every transport has ``recv() -> bytes`` (``b""`` when nothing is waiting), ``write(frame)``
-and ``close()``; none of them waits. A frame that cannot be sent at once is dropped and
-counted (``dropped``), whole: the stream transports keep a bounded output buffer and never
-cut a frame. The MAVLink codec (pymavlink) writes through ``write``, so these objects serve
-as its ``file``.
+Every transport has ``recv() -> bytes`` (``b""`` when nothing is waiting), ``write(frame)``,
+``flush()`` and ``close()``; none of them waits. Written frames wait in a bounded output
+buffer until ``flush`` (UDP: sent then, as few datagrams of at most ``MAX_DATAGRAM`` bytes as
+hold them, as autopilots pack their streams; TCP and serial: sent as far as the stream takes
+them, at each write and flush). A frame that cannot be sent is dropped and counted
+(``dropped``), whole: no frame is ever cut. The MAVLink codec (pymavlink) writes through
+``write``, so these objects serve as its ``file``.
 """
 from __future__ import annotations
 
@@ -31,7 +33,8 @@ log = logging.getLogger(__name__)
 
 MAX_PEERS = 4                  # udpin: peers answered
 RECONNECT_S = 1.0              # tcp: s between connection attempts while down
-OUT_BUFFER = 16 * 1024         # bytes waiting in a stream transport before frames are dropped
+OUT_BUFFER = 16 * 1024         # bytes waiting in a transport before frames are dropped
+MAX_DATAGRAM = 1472            # bytes of frames in one UDP datagram: an Ethernet MTU's payload
 READ_SIZE = 4096               # bytes read at most per recv() from a stream
 DEFAULT_BAUD = 57600
 
@@ -45,6 +48,7 @@ class Transport(Protocol):
 
     def recv(self) -> bytes: ...
     def write(self, frame: bytes) -> None: ...
+    def flush(self) -> None: ...          # send what was written (see the module doc)
     def close(self) -> None: ...
 
 
@@ -82,7 +86,8 @@ def open_transport(url: str, clock: Callable[[], float] = time.monotonic) -> Tra
 
 
 class UdpTransport:
-    """One non-blocking UDP socket: ``listen`` binds to (host, port), else sends there."""
+    """One non-blocking UDP socket: ``listen`` binds to (host, port), else sends there.
+    Frames written wait for :meth:`flush`, which packs them into datagrams."""
 
     datagrams = True
 
@@ -96,6 +101,8 @@ class UdpTransport:
             self._sock.bind(addr)
         else:
             self._peers[addr] = None
+        self._out: list[bytes] = []
+        self._queued = 0               # bytes in _out
         self.dropped = 0
 
     @property
@@ -115,14 +122,38 @@ class UdpTransport:
         return data
 
     def write(self, frame: bytes) -> None:
-        for addr in self._peers:
-            try:
-                self._sock.sendto(frame, addr)
-            except OSError:
-                self.dropped += 1
+        if self._queued + len(frame) > OUT_BUFFER:
+            self.dropped += 1
+            return
+        self._out.append(frame)
+        self._queued += len(frame)
+
+    def flush(self) -> None:
+        out, self._out, self._queued = self._out, [], 0
+        for frames in _packed(out):
+            datagram = b"".join(frames)
+            for addr in self._peers:
+                try:
+                    self._sock.sendto(datagram, addr)
+                except OSError:
+                    self.dropped += len(frames)
 
     def close(self) -> None:
+        self.flush()
         self._sock.close()
+
+
+def _packed(frames: list[bytes]) -> list[list[bytes]]:
+    """``frames`` in order, in groups of at most MAX_DATAGRAM bytes (a larger frame alone)."""
+    groups: list[list[bytes]] = []
+    size = MAX_DATAGRAM
+    for frame in frames:
+        if size + len(frame) > MAX_DATAGRAM:
+            groups.append([])
+            size = 0
+        groups[-1].append(frame)
+        size += len(frame)
+    return groups
 
 
 class _OutBuffer:
@@ -227,6 +258,14 @@ class TcpTransport:
             self._out.dropped += 1
             return
         self._out.push(frame)
+        self._send(sock)
+
+    def flush(self) -> None:
+        sock = self._ready()
+        if sock is not None:
+            self._send(sock)
+
+    def _send(self, sock: socket.socket) -> None:
         try:
             self._out.flush(sock.send)
         except OSError as exc:
@@ -268,6 +307,9 @@ class SerialTransport:
 
     def write(self, frame: bytes) -> None:
         self._out.push(frame)
+        self.flush()
+
+    def flush(self) -> None:
         self._out.flush(lambda data: os.write(self._fd, data))
 
     def close(self) -> None:
