@@ -129,6 +129,8 @@ class UdpTransport:
         self._queued += len(frame)
 
     def flush(self) -> None:
+        if not self._out:                  # most polls: nothing written
+            return
         out, self._out, self._queued = self._out, [], 0
         for frames in _packed(out):
             datagram = b"".join(frames)
@@ -146,9 +148,9 @@ class UdpTransport:
 def _packed(frames: list[bytes]) -> list[list[bytes]]:
     """``frames`` in order, in groups of at most MAX_DATAGRAM bytes (a larger frame alone)."""
     groups: list[list[bytes]] = []
-    size = MAX_DATAGRAM
+    size = 0                       # bytes in the last group
     for frame in frames:
-        if size + len(frame) > MAX_DATAGRAM:
+        if not groups or size + len(frame) > MAX_DATAGRAM:
             groups.append([])
             size = 0
         groups[-1].append(frame)

@@ -184,14 +184,13 @@ class LinkCounters:
 @dataclass
 class _Stream:
     period: float            # s
-    phase: float             # s after the first poll
     send: Callable[[int, VehicleState], None]
     k: int = 0               # next occurrence
 
     def due(self, start: float, now: float) -> bool:
-        if now + 1e-6 < start + self.phase + self.k * self.period:   # 1 us: rounding
+        if now + 1e-6 < start + self.k * self.period:   # 1 us: rounding
             return False
-        self.k = max(self.k + 1, math.floor((now - start - self.phase) / self.period) + 1)
+        self.k = max(self.k + 1, math.floor((now - start) / self.period) + 1)
         return True
 
 
@@ -227,13 +226,13 @@ class MavlinkLink:
         self._gcs_lost = False
         self._param_queue: list[int] = []
         self._text_id = 0
-        self._streams = [                       # all on one phase (the module doc)
-            _Stream(1.0, 0.0, self._send_heartbeat),
-            _Stream(0.1, 0.0, self._send_local_position),
-            _Stream(0.1, 0.0, self._send_attitude),
-            _Stream(0.1, 0.0, self._send_global_position),
-            _Stream(1.0, 0.0, self._send_sys_status),
-            _Stream(1.0, 0.0, self._send_origin_and_home),
+        self._streams = [                # all due from the first poll on (the module doc)
+            _Stream(1.0, self._send_heartbeat),
+            _Stream(0.1, self._send_local_position),
+            _Stream(0.1, self._send_attitude),
+            _Stream(0.1, self._send_global_position),
+            _Stream(1.0, self._send_sys_status),
+            _Stream(1.0, self._send_origin_and_home),
         ]
 
     # --- the loop's entry point ---------------------------------------------------------
