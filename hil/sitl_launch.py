@@ -39,11 +39,13 @@ class LaunchSettings:
                                    "their loops (10)", lo=0, hi=99)
     router_threads: int = setting(2, doc="Zenoh runtime worker threads of the router",
                                   lo=1, hi=16)
-    tick_groups: int = setting(2, doc="the agents tick in this many groups at phases spread "
+    tick_groups: int = setting(1, doc="the agents tick in this many groups at phases spread "
                                "over the period (the k-th robot at (k mod groups) / groups of "
-                               "it): each group's states reach the router as one burst, and "
-                               "on a machine that runs every agent a group's ticks end sooner "
-                               "than all of them at once; 1: all at phase 0", lo=1, hi=8)
+                               "it); 1: all at phase 0, as robots with synchronised clocks "
+                               "do, their states one burst a period (the least CPU in all); "
+                               "more: each group's ticks end sooner on a machine that runs "
+                               "every agent, at one burst and wake-up more a period",
+                               lo=1, hi=8)
     age_bound: float = setting(0.05, unit="s", doc="the summary warns when an agent's "
                                "neighbour-state age p99 exceeds this", lo=0.0, open_lo=True,
                                hi=10.0)

@@ -85,7 +85,9 @@ def launch(tmp_path):
 def test_sitl_paper_scenario(launch):
     sc = load_scenario(SCENARIOS / "paper.toml")
     # the paper's ideal robot, to compare with the batch simulator's ideal plant
-    run = launch("paper.toml", "--duration", "12", "--robot", str(ROOT / "robots" / "ideal.toml"))
+    # two tick groups (one is the default) so that their phases are checked below
+    run = launch("paper.toml", "--duration", "12", "--robot", str(ROOT / "robots" / "ideal.toml"),
+                 "--tick-groups", "2")
     code, out = run.wait(timeout=150)
     assert code == 0, out
     m = json.loads((run.out / "metrics.json").read_text())
