@@ -1,12 +1,18 @@
 """Batch simulator cost per robot-step for growing swarms (prints a table).
 
     .venv/bin/python bench/batch_scaling.py [--sizes 9 100 1000 10000] [--repeats 3]
+    .venv/bin/python bench/batch_scaling.py --governor-cost [--robot robots/cart.toml]
 
 Each size runs a grid formation (spacing 5 m) moving at 2 m/s through a field of obstacles,
 robots starting scattered around their places, T = 0.02 s, 4 physics substeps, metrics on,
 no trajectory recording. Reported: median wall time per control period, per robot-step, the
 real-time factor (simulated / wall time) and the share spent in the control law. Also the
 paper example end to end (20 s simulated). Medians over repeats: the machine is shared.
+
+``--governor-cost``: the safety governor's share of that cost, each size run with the
+governor on and off (``[control] governor``), alternating in one process, and the ratio of
+the medians (issue 16 asks at most 1.5x). ``--robot`` runs a robot profile instead of the
+ideal robot.
 """
 from __future__ import annotations
 
@@ -21,6 +27,7 @@ from agent.config import ControlParams, RobotParams
 from agent.formation import Formation, FormationKind, formation_offsets
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.world import Obstacles
+from hil.robot_profile import load_robot_profile
 from hil.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -39,27 +46,54 @@ def swarm(n: int, seed: int = 0):
     return poses, form, obstacles
 
 
-def time_run(n: int, steps: int, repeats: int) -> tuple[float, float]:
-    """(median wall seconds per period, median share of time in the law)."""
+def run_once(n: int, steps: int, control: ControlParams, robot: RobotParams
+             ) -> tuple[float, float]:
+    """(wall seconds per period, share of time in the law) of one run."""
     poses, form, obstacles = swarm(n)
-    control = ControlParams()
-    walls, shares = [], []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        res = simulate(np.arange(n), poses, form, obstacles, control, RobotParams(),
-                       SimOptions(duration=steps * control.period, record_every=0),
-                       clock=time.perf_counter)
-        wall = time.perf_counter() - t0
-        walls.append(wall / (steps + 1))
-        shares.append(res.law_seconds / wall)
-    return statistics.median(walls), statistics.median(shares)
+    t0 = time.perf_counter()
+    res = simulate(np.arange(n), poses, form, obstacles, control, robot,
+                   SimOptions(duration=steps * control.period, record_every=0),
+                   clock=time.perf_counter)
+    wall = time.perf_counter() - t0
+    return wall / (steps + 1), res.law_seconds / wall
+
+
+def time_run(n: int, steps: int, repeats: int, robot: RobotParams) -> tuple[float, float]:
+    """(median wall seconds per period, median share of time in the law)."""
+    runs = [run_once(n, steps, ControlParams(), robot) for _ in range(repeats)]
+    return statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
+
+
+def governor_cost(sizes: list[int], repeats: int, robot: RobotParams) -> None:
+    """Print, per size, the cost per robot-step with the governor on and off (runs
+    alternating) and the ratio of the medians."""
+    print(f"{'robots':>7} {'on us/robot-step':>17} {'off us/robot-step':>18} {'ratio':>6}")
+    for n in sizes:
+        steps = 500 if n <= 1000 else 100
+        on: list[float] = []
+        off: list[float] = []
+        for _ in range(repeats):
+            on.append(run_once(n, steps, ControlParams(governor=True), robot)[0] / n)
+            off.append(run_once(n, steps, ControlParams(governor=False), robot)[0] / n)
+        m_on, m_off = statistics.median(on), statistics.median(off)
+        print(f"{n:>7} {m_on * 1e6:>17.2f} {m_off * 1e6:>18.2f} {m_on / m_off:>6.2f}",
+              flush=True)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[9, 100, 1000, 10000])
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--governor-cost", action="store_true",
+                        help="time each size with the safety governor on and off")
+    parser.add_argument("--robot", metavar="FILE",
+                        help="robot profile (robots/*.toml; default: the ideal robot)")
     args = parser.parse_args()
+    robot = load_robot_profile(args.robot) if args.robot else RobotParams()
+    if args.governor_cost:
+        run_once(9, 10, ControlParams(), robot)        # compile before timing
+        governor_cost(args.sizes, args.repeats, robot)
+        return
 
     sc = load_scenario(ROOT / "scenarios" / "paper.toml")
     paper = []
@@ -76,7 +110,7 @@ def main() -> None:
           f"{'law share':>10}")
     for n in args.sizes:
         steps = 500 if n <= 1000 else 100
-        wall, share = time_run(n, steps, args.repeats)
+        wall, share = time_run(n, steps, args.repeats, robot)
         print(f"{n:>7} {wall * 1e3:>10.3f} {wall / n * 1e6:>14.2f} {period / wall:>12.1f} "
               f"{share:>10.0%}")
 
