@@ -135,25 +135,47 @@ class SpeedEnvelope:
     head_on: float      # m/s, the fastest the governor allows toward a robot just sensed
     sensing_range: float  # m
     data_age: float     # s, the expected age of neighbour data
+    pace: float = 0.0   # m/s, the speed of the formation's places
+    beside: float = 0.0  # m, the disc of a neighbour driving beside the robot at the pace
 
     def describe(self) -> str:
         verdict = ("never limits driving in the open" if self.head_on >= self.top else
                    f"limits the robot to {self.head_on:.2f} m/s toward a robot it has just "
                    f"sensed {self.sensing_range:g} m away")
         return (f"safety governor: top speed {self.top:.2f} m/s; with neighbour data "
-                f"{self.data_age * 1e3:.0f} ms old it {verdict}")
+                f"{self.data_age * 1e3:.0f} ms old it {verdict}; a robot driving beside "
+                f"it at the places' {self.pace:.2f} m/s is a disc of {self.beside:.2f} m: it "
+                f"passes between two such robots only where they are more than "
+                f"{self.passable:.2f} m apart")
+
+    @property
+    def passable(self) -> float:
+        """The least distance [m] between two robots driving side by side at the pace that
+        a robot can pass between: it owns half the gap beyond each one's disc, so the
+        gap must be wider than both discs."""
+        return 2.0 * self.beside
 
 
 def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: float,
-                   data_age: float = 0.0) -> SpeedEnvelope:
+                   data_age: float = 0.0, pace: float = 0.0) -> SpeedEnvelope:
     """The governor's speed toward a robot met head-on at the edge of the sensing range
     [m]: each robot owns half the gap beyond a, less what the other travels in the data's
-    age [s] at the top speed, and must stop in it after a period and the drive latency."""
-    from agent.governor import braking_speed
+    age [s] at the top speed, and must stop in it after a period and the drive latency.
+    And the disc (agent.governor.neighbour_radii: the radius of the gap's shared half) of a
+    neighbour abeam that, like this robot, drives straight on at ``pace`` [m/s]."""
+    from agent.governor import SPLITS, braking_speed, neighbour_radii
     top = min(control.v_max, robot.v_wheel_max)
     free = 0.5 * (sensing_range - control.a) - top * data_age
     head_on = braking_speed(free, robot.a_max, control.period + robot.drive_latency)
-    return SpeedEnvelope(top, head_on, sensing_range, data_age)
+    # this robot's path since each split of the age, at the pace; the neighbour's report,
+    # data_age old, puts it that much behind
+    trails = [pace * data_age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
+    _, beside, _, _ = neighbour_radii(
+        -sensing_range, trails[0], 0.5 * math.pi, pace, 0.0, data_age, trails, control.a,
+        robot.a_max, 0.5 * robot.wheel_base, top, math.inf,
+        robot.watchdog_timeout + robot.drive_latency, robot.v_wheel_max, robot.a_up,
+        control.period + robot.drive_latency)
+    return SpeedEnvelope(top, head_on, sensing_range, data_age, pace, beside)
 
 
 CONTROL_PARAMS = parameters(ControlParams, "BS_")

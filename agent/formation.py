@@ -75,6 +75,13 @@ class Formation:
     velocity: tuple[float, float] = (0.0, 0.0)
     omega: float = 0.0
 
+    @property
+    def pace(self) -> float:
+        """The speed [m/s] of its fastest place: the velocity's, plus omega times the
+        offset farthest from the centre of rotation."""
+        reach = float(np.hypot(self.offsets[:, 0], self.offsets[:, 1]).max(initial=0.0))
+        return math.hypot(*self.velocity) + abs(self.omega) * reach
+
     def point(self, i: int, t: float) -> tuple[float, float, float, float]:
         """:func:`reference_point` of robot ``i`` at time t [s]."""
         ox, oy = self.offsets[i].tolist()
@@ -86,10 +93,14 @@ class Formation:
         out = np.array([self.point(i, t) for i in range(len(self.offsets))]).reshape(-1, 4)
         return out[:, :2], out[:, 2:]
 
-    def min_spacing(self) -> float:
-        """Smallest distance [m] between two reference positions (inf for one robot)."""
-        n = len(self.offsets)
-        if n < 2:
-            return math.inf
-        d = np.linalg.norm(self.offsets[:, None, :] - self.offsets[None, :, :], axis=-1)
-        return float(d[~np.eye(n, dtype=bool)].min())
+    def min_spacing(self, chunk: int = 512) -> float:
+        """Smallest distance [m] between two reference positions (inf for one robot), in
+        chunks of ``chunk`` rows so that 10 000 places need no N x N array."""
+        off, best = self.offsets, math.inf
+        for lo in range(0, len(off), chunk):
+            rows = off[lo:lo + chunk]
+            d = np.hypot(rows[:, None, 0] - off[None, :, 0], rows[:, None, 1] - off[None, :, 1])
+            d[np.arange(len(rows)), np.arange(lo, lo + len(rows))] = np.inf     # not itself
+            best = min(best, float(d.min()))
+        return best
+

@@ -58,8 +58,17 @@ def run(args: argparse.Namespace, console: Console) -> int:
                       "wheel slip or encoder noise in \\[world] every robot knows its pose"
                       "[/yellow]")
     if options.plant is PlantKind.WHEELS:
-        console.print(speed_envelope(sc.control, sc.robot, sc.sensing_range,
-                                     sc.world.link_delay + sc.control.period).describe())
+        envelope = speed_envelope(sc.control, sc.robot, sc.sensing_range,
+                                  sc.world.link_delay + sc.control.period, sc.formation.pace)
+        console.print(envelope.describe())
+        spacing = sc.formation.min_spacing()
+        if spacing <= envelope.passable:
+            console.print(f"[yellow]warning: the formation's places are as close as "
+                          f"{spacing:.2f} m: with data this old no robot passes between two "
+                          f"robots in their places, and one whose place is across the "
+                          f"formation waits behind it; give the places more room, or let "
+                          f"the mission assign them (\\[formation] assign = \"shortest\")"
+                          f"[/yellow]")
     started = time.perf_counter()
     with LazyProgress(console, f"sim {sc.name}") as progress:
         result = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,

@@ -58,6 +58,25 @@ def test_report_on_a_folder_that_is_not_a_run(tmp_path, capsys):
     assert "scenario.toml" in capsys.readouterr().err
 
 
+def test_sim_warns_when_data_this_old_make_the_places_walls(tmp_path, capsys):
+    """Fast robots, 5 m apart in a circle moving at 3 m/s: on a 0.5 s link the governor's
+    discs close the gaps between places (docs/controller.md A10), and sim says so before
+    it runs; on a prompt link it does not."""
+    robots = "".join(f"[[robots]]\nid = {i + 1}\npose = [{-20.0 - 3 * i}, 0.0, 0.0]\n"
+                     for i in range(4))
+    for delay, warned in ((0.5, True), (0.0, False)):
+        sc = tmp_path / f"walls-{delay}.toml"
+        sc.write_text(f'name = "walls"\nduration = 1.0\n[formation]\nkind = "circle"\n'
+                      f'spacing = 5.0\nvelocity = [3.0, 0.0]\n[world]\n'
+                      f'link_delay = {delay}\n{robots}')
+        assert main(["sim", str(sc), "--robot", str(ROOT / "robots" / "fast.toml"),
+                     "--out", str(tmp_path / f"o{delay}"), "--record-every", "0"]) == 0
+        out = " ".join(capsys.readouterr().out.split())
+        assert ("places are as close as 5.00 m" in out) == warned, out
+        assert ('([formation] assign = "shortest")' in out) == warned
+        assert "a robot driving beside it at the places' 3.00 m/s" in out
+
+
 def test_metrics_only_run(tmp_path):
     out = tmp_path / "m"
     assert main(["sim", str(SCENARIOS / "head_on_swap.toml"), "--out", str(out),

@@ -1,6 +1,7 @@
 import argparse
 import dataclasses
 import math
+from pathlib import Path
 
 import pytest
 
@@ -63,6 +64,26 @@ def test_the_speed_envelope_states_what_the_governor_allows():
     # 12 m/s top, 6.3 m/s^2: each robot owns (8 - 1)/2 - 12 * 0.05 = 2.9 m
     assert slow.head_on == pytest.approx(braking_speed(2.9, 2 * math.pi * 0.2 * 5.0, 0.02))
     assert "limits the robot to" in slow.describe()
+
+
+@pytest.mark.parametrize("profile, old_apart", [("cart", (3.0, 5.0)), ("fast", (5.0, 9.0))])
+def test_the_envelope_says_how_far_apart_robots_at_the_pace_must_be_to_pass_between(
+        profile, old_apart):
+    """A robot beside another, both at the places' pace (half the top speed): its disc is
+    a (and a little) on fresh data and grows with the data's age; a robot passes between
+    two such robots only more than two discs apart. With 0.5 s old data, places 5 m apart
+    still let a cart through, not the fast profile (docs/reports/realistic-horizon.md)."""
+    from hil.robot_profile import load_robot_profile
+    robot = load_robot_profile(Path(__file__).resolve().parent.parent / "robots"
+                               / f"{profile}.toml")
+    p = ControlParams()
+    pace = 0.5 * min(p.v_max, robot.v_wheel_max)
+    fresh = speed_envelope(p, robot, 10.0, p.period, pace)
+    old = speed_envelope(p, robot, 10.0, 0.5 + p.period, pace)
+    assert p.a < fresh.beside < old.beside
+    assert fresh.passable == pytest.approx(2 * fresh.beside) and fresh.passable < 2.6
+    assert old_apart[0] < old.passable < old_apart[1]
+    assert f"more than {old.passable:.2f} m apart" in old.describe()
 
 
 def test_every_field_is_documented_with_a_unit():

@@ -28,6 +28,17 @@ def test_named_formations_are_centred_and_spaced(kind, n):
         assert f.min_spacing() == pytest.approx(3.0)
 
 
+def test_min_spacing_in_chunks_and_the_fastest_place():
+    rng = np.random.default_rng(3)
+    off = rng.uniform(-50.0, 50.0, (40, 2))
+    d = np.linalg.norm(off[:, None] - off[None], axis=-1)
+    want = d[~np.eye(40, dtype=bool)].min()
+    f = Formation(off, (0.0, 0.0), (3.0, 4.0), omega=-0.1)
+    assert f.min_spacing(chunk=7) == f.min_spacing() == pytest.approx(want)
+    # the velocity's 5 m/s plus |omega| x the farthest place's distance from the centre
+    assert f.pace == pytest.approx(5.0 + 0.1 * np.linalg.norm(off, axis=1).max())
+
+
 def test_rotating_formation_velocity_is_the_derivative():
     f = Formation(formation_offsets(FormationKind.CIRCLE, 6, 4.0), (1.0, 2.0), (0.5, -0.2),
                   omega=0.3)
