@@ -5,6 +5,7 @@ import argparse
 import dataclasses
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 
@@ -12,6 +13,9 @@ from firmware_sim.plant import PlantKind
 from hil.cli_options import Subparsers
 from hil.console import LazyProgress, summary_table
 from hil.exit_codes import EXIT_OK, EXIT_UNSAFE, BadInput
+
+if TYPE_CHECKING:
+    from hil.scenario import Scenario
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -33,7 +37,6 @@ def add_parser(sub: Subparsers) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Simulate, write the run folder (metrics, data, figures), print the summary."""
-    from agent.config import speed_envelope
     from firmware_sim.batch import SimOptions, simulate
     from hil import run_folder
     from hil.figures import draw_figures
@@ -58,17 +61,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
                       "wheel slip or encoder noise in \\[world] every robot knows its pose"
                       "[/yellow]")
     if options.plant is PlantKind.WHEELS:
-        envelope = speed_envelope(sc.control, sc.robot, sc.sensing_range,
-                                  sc.world.link_delay + sc.control.period, sc.formation.pace)
-        console.print(envelope.describe())
-        spacing = sc.formation.min_spacing()
-        if spacing <= envelope.passable:
-            console.print(f"[yellow]warning: the formation's places are as close as "
-                          f"{spacing:.2f} m: with data this old no robot passes between two "
-                          f"robots in their places, and one whose place is across the "
-                          f"formation waits behind it; give the places more room, or let "
-                          f"the mission assign them (\\[formation] assign = \"shortest\")"
-                          f"[/yellow]")
+        state_envelope(console, sc)
     started = time.perf_counter()
     with LazyProgress(console, f"sim {sc.name}") as progress:
         result = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
@@ -87,3 +80,20 @@ def run(args: argparse.Namespace, console: Console) -> int:
                                          f"{options.duration:g} s simulated in {elapsed:.2f} s"))
     console.print(f"metrics: {out / run_folder.METRICS}\nfigures: {out / run_folder.FIGURES}/")
     return EXIT_OK if metrics["collisions"] == 0 else EXIT_UNSAFE
+
+
+def state_envelope(console: Console, sc: Scenario) -> None:
+    """Print what the safety governor allows the scenario's robot (agent.config.
+    speed_envelope) with neighbour data a link delay and a period old, and warn when the
+    formation's places are too close for a robot to pass between two robots in them."""
+    from agent.config import speed_envelope
+    envelope = speed_envelope(sc.control, sc.robot, sc.sensing_range,
+                              sc.world.link_delay + sc.control.period, sc.formation.pace)
+    console.print(envelope.describe())
+    spacing = sc.formation.min_spacing()
+    if spacing <= envelope.passable:
+        console.print(f"[yellow]warning: the formation's places are as close as "
+                      f"{spacing:.2f} m: with data this old no robot passes between two "
+                      f"robots in their places, and one whose place is across the formation "
+                      f"waits behind it; give the places more room, or let the mission "
+                      f"assign them (\\[formation] assign = \"shortest\")[/yellow]")

@@ -86,6 +86,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from hil.figures import draw_figures
     from hil.robot_profile import SITL_DEFAULT, load_robot_profile
     from hil.scenario import load_scenario
+    from hil.sim_cli import state_envelope
     from hil.sitl import SitlError, SitlOptions, run_sitl
     from hil.sitl_launch import LaunchSettings
     from hil.sitl_report import analyse_recording
@@ -98,6 +99,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if profile:
         sc = dataclasses.replace(sc, robot=load_robot_profile(profile))
         console.print(f"robot: {profile}")
+    state_envelope(console, sc)
     out = Path(args.out)
     try:
         launch = section_from_args(LaunchSettings, args)
