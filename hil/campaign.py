@@ -255,10 +255,13 @@ def _execute(client: Any, runs: list[Run], in_flight: int,
 
 
 def _warm_up(client: Any) -> float:
-    """Load the compiled kernels on every worker at once; the slowest worker's seconds."""
+    """Load the compiled kernels on every worker at once; the slowest worker's seconds. A
+    worker lost meanwhile (restarted by its nanny, starved so long it missed its
+    heartbeats) is left out: the runs load the kernels themselves, and Dask gives a lost
+    worker's runs to the others."""
     from hil.campaign_run import warm_up
-    took = client.run(warm_up)
-    return max(took.values(), default=0.0)
+    took = client.run(warm_up, on_error="return")
+    return max((t for t in took.values() if isinstance(t, float)), default=0.0)
 
 
 # --- a campaign -------------------------------------------------------------------------

@@ -271,6 +271,22 @@ def test_a_run_that_raises_is_a_failed_row(monkeypatch):
     assert row["family_kind"] == "line" and row["seed"] == 0 and "converged" not in row
 
 
+def test_warming_up_leaves_out_a_worker_lost_meanwhile():
+    """A worker starved past its heartbeats during the warm-up is restarted by its nanny,
+    and the broadcast to it fails: the campaign goes on with the others (a campaign run
+    under another, at low priority, aborted there with CommClosedError)."""
+    from distributed.comm.core import CommClosedError
+
+    from hil.campaign import _warm_up
+
+    class Client:
+        def run(self, function, on_error="raise"):
+            assert on_error == "return"
+            return {"tcp://127.0.0.1:1": 1.5, "tcp://127.0.0.1:2": CommClosedError("closed")}
+
+    assert _warm_up(Client()) == 1.5
+
+
 def test_rows_become_typed_arrow_columns():
     from hil.campaign import arrow_table
     rows = [{"key": "a", "n": 1, "x": 1, "ok": True, "pairs": [[1, 2]], "t": None},
