@@ -190,10 +190,11 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             continue
         # the governor's hazards: neighbours where they can be by now given their data's
         # age, and the detected obstacles; all grown by the robot's own position
-        # uncertainty (own[:, 3], with a pose source)
+        # uncertainty (own[:, 3], with a pose source). None with the governor off: the law
+        # reads them for it alone
         grow = own[i, 3] if own.shape[1] > 3 else 0.0
         n_h = 0
-        for q in range(m):
+        for q in range(m if p.governor else 0):
             j = nbr_j[q]
             if not truth and seen[j, 2] == NONE:
                 continue
@@ -215,7 +216,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             n_h += 1
         if not truth:
             k = detect(i, step, seed, det_noise, det_dropout, k, o_x, o_y, o_r, o_k)
-        for q in range(k):
+        for q in range(k if p.governor else 0):
             h_x[n_h], h_y[n_h], h_r[n_h], h_m[n_h] = o_x[q], o_y[q], o_r[q] + a + grow, 0.0
             h_h[n_h] = -math.inf
             n_h += 1
