@@ -103,4 +103,3 @@ class Formation:
             d[np.arange(len(rows)), np.arange(lo, lo + len(rows))] = np.inf     # not itself
             best = min(best, float(d.min()))
         return best
-
