@@ -82,6 +82,7 @@ def test_filters_by_node_and_message():
     assert {(s.name, s.node) for s in stats.streams.values()} == {("Heartbeat", 1)}
 
 
+@pytest.mark.flaky(reruns=2)   # wall clock: a stall of a shared machine sends the log at once
 def test_log_decode_replay_reproduces_the_frames(tmp_path):
     frames = traffic(seconds=0.3)
     log = tmp_path / "capture.log"
