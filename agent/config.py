@@ -156,6 +156,23 @@ class SpeedEnvelope:
         return 2.0 * self.beside
 
 
+def disc_args(control: ControlParams, robot: RobotParams, staleness: float
+              ) -> tuple[float, tuple[float, float, float, float, float, float]]:
+    """(half the wheel base [m], the arguments of agent.governor.neighbour_hazard after
+    (speed, turn, age, trail)): a, accel, top speed, ``staleness`` [s], stop time, the
+    wheels' top speed. The swarm's robots are alike: a neighbour's are this robot's."""
+    return 0.5 * robot.wheel_base, (control.a, robot.a_max,
+                                    min(control.v_max, robot.v_wheel_max), staleness,
+                                    robot.watchdog_timeout + robot.drive_latency,
+                                    robot.v_wheel_max)
+
+
+def commitment(control: ControlParams, robot: RobotParams) -> tuple[float, float]:
+    """(speed-up [m/s^2], lag [s]): how fast a neighbour's law speeds it up and how late its
+    wheels follow the command it reports (agent.governor.approach, A17)."""
+    return robot.a_up, control.period + robot.drive_latency
+
+
 def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: float,
                    data_age: float = 0.0, pace: float = 0.0) -> SpeedEnvelope:
     """The governor's speed toward a robot met head-on at the edge of the sensing range
@@ -170,11 +187,10 @@ def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: fl
     # this robot's path since each split of the age, at the pace; the neighbour's report,
     # data_age old, puts it that much behind
     trails = [pace * data_age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
-    _, beside, _, _ = neighbour_radii(
-        -sensing_range, trails[0], 0.5 * math.pi, pace, 0.0, data_age, trails, control.a,
-        robot.a_max, 0.5 * robot.wheel_base, top, math.inf,
-        robot.watchdog_timeout + robot.drive_latency, robot.v_wheel_max, robot.a_up,
-        control.period + robot.drive_latency)
+    half_base, disc = disc_args(control, robot, math.inf)
+    _, beside, _, _ = neighbour_radii(-sensing_range, trails[0], 0.5 * math.pi, pace, 0.0,
+                                      data_age, trails, disc[0], disc[1], half_base,
+                                      *disc[2:], *commitment(control, robot))
     return SpeedEnvelope(top, head_on, sensing_range, data_age, pace, beside)
 
 

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
-from agent.config import CONTROL_PARAMS
+from agent.config import CONTROL_PARAMS, commitment, disc_args
 from agent.formation import Formation
 from agent.governor import SPLITS, neighbour_radii, silent_radius
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
@@ -456,20 +456,12 @@ class Agent:
         return hx, hy, hr, hh, hm
 
     def _disc_args(self) -> tuple[float, tuple[float, float, float, float, float, float]]:
-        """(half the wheel base [m], the arguments of agent.governor.neighbour_hazard after
-        (speed, turn, age, trail)): a, accel, top speed, staleness, stop time, the wheels' top
-        speed."""
-        s, r = self.s, self.s.robot
-        return 0.5 * r.wheel_base, (s.control.a, r.a_max, min(s.control.v_max, r.v_wheel_max),
-                                    s.timeouts.staleness, r.watchdog_timeout + r.drive_latency,
-                                    r.v_wheel_max)
+        """agent.config.disc_args for this robot and its staleness limit."""
+        return disc_args(self.s.control, self.s.robot, self.s.timeouts.staleness)
 
     def _commitment(self) -> tuple[float, float]:
-        """(speed-up [m/s^2], lag [s]): how fast a neighbour's law speeds it up and how late
-        its wheels follow the command it reports (agent.governor.approach, A17); the
-        swarm's robots are alike."""
-        r = self.s.robot
-        return r.a_up, self.s.control.period + r.drive_latency
+        """agent.config.commitment for this robot (the swarm's robots are alike)."""
+        return commitment(self.s.control, self.s.robot)
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],

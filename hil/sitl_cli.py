@@ -99,7 +99,6 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if profile:
         sc = dataclasses.replace(sc, robot=load_robot_profile(profile))
         console.print(f"robot: {profile}")
-    state_envelope(console, sc)
     out = Path(args.out)
     try:
         launch = section_from_args(LaunchSettings, args)
@@ -115,6 +114,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
                        robot_profile=str(Path(profile).resolve()) if profile else None)
     if problem := near_radius_problem(opts.near_radius, sc.sensing_range):
         raise BadInput(f"--near-radius {problem}")
+    state_envelope(console, sc)
     started = time.perf_counter()
     try:
         swarm = run_sitl(sc, out, opts, console)
