@@ -35,8 +35,6 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from agent.kinematics import wrap_angle
-
 if TYPE_CHECKING:
     from agent.avoidance import FloatSeq
 
@@ -113,6 +111,8 @@ def _paired(trails: FloatSeq, age: float, speed: float, turn_rate: float, a: flo
     half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
     accel_lag2 = accel_lag * lag
     for k in range(splits):
+        if k + 1 < splits and trails[k] == trails[k + 1]:
+            continue    # the next split's end is later, its start no nearer: it dominates
         t = max(age * (k + 1) / splits, 0.0)
         # travel: its wheels within a ramp of the command it reported for the lag, then
         # its speed grown by at most up since (or, more loosely, the ramp all along)
@@ -315,6 +315,11 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     spread = 0.5 * abs(sweep) + bend
     middle = theta + 0.5 * sweep
     reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period, turn)
+    head_x, head_y = math.cos(middle), math.sin(middle)
+    # the pads as cosine and sine; a pad of half a turn or more takes in every bearing
+    still = (math.cos(spread), math.sin(spread), spread >= math.pi)
+    moving = (math.cos(spread + MOVING_PAD), math.sin(spread + MOVING_PAD),
+              spread + MOVING_PAD >= math.pi)
     gap_fwd = gap_bwd = math.inf       # m, the least free distance less margin, over c
     for h in range(len(haz_r)):
         dx, dy = haz_x[h] - x, haz_y[h] - y
@@ -322,9 +327,12 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
         free = min(d - haz_r[h], 0.5 * (d - haz_half[h]))
         if free >= reach + margin:   # cannot hold the robot below its top speed
             continue
-        ahead = abs(wrap_angle(math.atan2(dy, dx) - middle))   # rad from the heading
-        pad = spread + (MOVING_PAD if haz_moving[h] != 0.0 else 0.0)
-        c_fwd, c_bwd = _cosine(ahead - pad, d), _cosine(math.pi - ahead - pad, d)
+        c_fwd = c_bwd = 1.0          # on the robot
+        if d >= EPS:
+            # cosine and sine of the bearing's angle from the heading
+            along, across = (dx * head_x + dy * head_y) / d, abs(dx * head_y - dy * head_x) / d
+            pad = moving if haz_moving[h] != 0.0 else still
+            c_fwd, c_bwd = _cosine(along, across, pad), _cosine(-along, across, pad)
         if c_fwd > EPS:
             gap_fwd = min(gap_fwd, (free - margin) / c_fwd)
         if c_bwd > EPS:
@@ -338,10 +346,15 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     return fwd, bwd, room
 
 
-def _cosine(off: float, d: float) -> float:
-    """The weight of a hazard ``off`` [rad] beyond the headings the robot sweeps, ``d`` [m]
-    away: 1 within the sweep (or on the robot), none (<= 0) beyond 90 degrees."""
-    return 1.0 if d < EPS or off <= 0.0 else math.cos(off)
+def _cosine(along: float, across: float, pad: tuple[float, float, bool]) -> float:
+    """The weight of a hazard whose bearing makes an angle of cosine ``along`` and sine
+    ``across`` (>= 0) with the heading, the robot sweeping the headings within an angle
+    ``pad`` of it (its cosine, sine, and whether it is half a turn or more): 1 within the
+    sweep, the cosine of the angle beyond it otherwise (<= 0 beyond 90 degrees)."""
+    cos_pad, sin_pad, everywhere = pad
+    if everywhere or along >= cos_pad:
+        return 1.0
+    return along * cos_pad + across * sin_pad
 
 
 def _limit(gap: float, going: float, ramp: float, latency: float, accel: float,

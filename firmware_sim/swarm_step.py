@@ -194,16 +194,20 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         # reads them for it alone
         grow = own[i, 3] if own.shape[1] > 3 else 0.0
         n_h = 0
+        trails_age = math.nan
         for q in range(m if p.governor else 0):
             j = nbr_j[q]
             if not truth and seen[j, 2] == NONE:
                 continue
             age = t - view[j, 5]
             # this robot's path since each split of the age: from the period at or before
-            for piece in range(SPLITS):
-                since = age * (SPLITS - piece) / SPLITS
-                ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
-                trails[piece] = path[step % ring, i] - path[(step - ago) % ring, i]
+            # (neighbours heard in the same period share it)
+            if age != trails_age:
+                trails_age = age
+                for piece in range(SPLITS):
+                    since = age * (SPLITS - piece) / SPLITS
+                    ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
+                    trails[piece] = path[step % ring, i] - path[(step - ago) % ring, i]
             full, half, east, north = neighbour_radii(x - view[j, 0], y - view[j, 1],
                                                       view[j, 2], view[j, 3], view[j, 4],
                                                       age, trails, a, p.accel,

@@ -8,7 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.governor import (
+    MOVING_PAD,
     SPLITS,
+    _paired,
     approach,
     braking_speed,
     neighbour_hazard,
@@ -19,7 +21,7 @@ from agent.governor import (
     stopping,
     turn_limit,
 )
-from agent.kinematics import arc_step
+from agent.kinematics import arc_step, wrap_angle
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
@@ -407,6 +409,41 @@ def test_a_hazard_ahead_limits_forward_only():
     assert fwd == pytest.approx(braking_speed(3.0, ACCEL, 0.04)) and bwd == math.inf
     fwd, bwd = limits(-5.0, 0.0)
     assert fwd == math.inf and bwd == pytest.approx(braking_speed(3.0, ACCEL, 0.04))
+
+
+@settings(max_examples=300, deadline=None)
+@given(bearing=st.floats(-math.pi, math.pi), theta=st.floats(-math.pi, math.pi),
+       d=st.floats(2.5, 8.0), moving=st.sampled_from([0.0, 1.0]))
+def test_a_hazard_counts_with_the_cosine_of_its_angle_beyond_the_heading(bearing, theta, d,
+                                                                         moving):
+    """A robot at rest, not turning: a hazard ``bearing`` off the world's x axis limits
+    each way of travel as if its free distance were shortened by the cosine of its angle
+    from that way (less MOVING_PAD for a moving one), not at all beyond 90 degrees."""
+    hx, hy = d * math.cos(bearing), d * math.sin(bearing)
+    pad = MOVING_PAD if moving else 0.0
+    ahead = abs(wrap_angle(bearing - theta))
+    for off, got in ((ahead - pad, limits(hx, hy, moving=moving, theta=theta)[0]),
+                     (math.pi - ahead - pad, limits(hx, hy, moving=moving, theta=theta)[1])):
+        c = 1.0 if off <= 0.0 else math.cos(off)
+        if abs(c) < 1e-6:
+            continue                           # at 90 degrees: either answer is right
+        want = braking_speed((d - 2.0) / c, ACCEL, 0.04) if c > 0.0 else math.inf
+        assert got == pytest.approx(want, rel=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(speed=st.floats(0.0, 3.0), turn_rate=st.floats(-2.0, 2.0), age=st.floats(0.0, 0.6),
+       path=st.lists(st.sampled_from([0.0, 0.1, 0.25]), min_size=SPLITS, max_size=SPLITS),
+       up=st.floats(0.2, 2.0))
+def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path, up):
+    """The discs are the largest over the splits of the age, each split's reach to its end
+    paired with this robot's path from its start: the same, bit for bit, as pairing each
+    split alone (the splits a later one dominates, with the same path, are skipped)."""
+    trails = [sum(path[k:]) for k in range(SPLITS)]     # the path since each split's start
+    got = _paired(trails, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04)
+    alone = [_paired([trails[k]], age * (k + 1) / SPLITS, speed, turn_rate, A, ACCEL, 0.4,
+                     TOP, up, 0.04) for k in range(SPLITS)]
+    assert got == (max(r[0] for r in alone), max(r[1] for r in alone))
 
 
 def test_a_static_hazard_abeam_does_not_limit_but_a_moving_one_does():
