@@ -1,7 +1,7 @@
 """Batch simulator cost per robot-step for growing swarms (prints a table).
 
     .venv/bin/python bench/batch_scaling.py [--sizes 9 100 1000 10000] [--repeats 3]
-    .venv/bin/python bench/batch_scaling.py --governor-cost [--robot robots/cart.toml]
+    .venv/bin/python bench/batch_scaling.py --governor-cost [--same-states] [--robot FILE]
 
 Each size runs a grid formation (spacing 5 m) moving at 2 m/s through a field of obstacles,
 robots starting scattered around their places, T = 0.02 s, 4 physics substeps, metrics on,
@@ -11,20 +11,27 @@ paper example end to end (20 s simulated). Medians over repeats: the machine is 
 
 ``--governor-cost``: the safety governor's share of that cost, each size run with the
 governor on and off (``[control] governor``), alternating in one process, and the ratio of
-the medians (issue 16 asks at most 1.5x). ``--robot`` runs a robot profile instead of the
-ideal robot.
+the medians (issue 16 asks at most 1.5x). The two runs drive different paths; with
+``--same-states`` the control step alone is timed instead, with and without the governor
+on the very same states (each period of a run with it, the step without it first, its
+results thrown away). ``--robot`` runs a robot profile instead of the ideal robot.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import inspect
 import statistics
 import time
+import types
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from agent.config import ControlParams, RobotParams
 from agent.formation import Formation, FormationKind, formation_offsets
+from firmware_sim import compiled, swarm_step
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.world import Obstacles
 from hil.robot_profile import load_robot_profile
@@ -80,19 +87,77 @@ def governor_cost(sizes: list[int], repeats: int, robot: RobotParams) -> None:
               flush=True)
 
 
+@contextlib.contextmanager
+def control_timed(spent: dict[str, float]) -> Iterator[None]:
+    """While inside, the batch simulator's compiled control step also runs with the
+    governor off on the same inputs (into copies of its outputs), each timed: seconds
+    added to ``spent["on"]`` and ``spent["off"]``."""
+    kernels = compiled.kernels()
+    names = list(inspect.signature(swarm_step.control).parameters)
+    law_at = names.index("p")
+    outputs = [i for i, name in enumerate(names)
+               if name.startswith("out_") or name in ("watch_j", "watch_k")]
+
+    def control(*args):
+        off = list(args)
+        off[law_at] = args[law_at]._replace(governor=False)
+        for i in outputs:
+            off[i] = args[i].copy()
+        t0 = time.perf_counter()
+        kernels.control(*off)
+        t1 = time.perf_counter()
+        need = kernels.control(*args)
+        spent["off"] += t1 - t0
+        spent["on"] += time.perf_counter() - t1
+        return need
+
+    timed = types.SimpleNamespace(**vars(kernels))
+    timed.control = control
+    original = compiled.kernels
+    compiled.kernels = lambda: timed          # what simulate() looks up
+    try:
+        yield
+    finally:
+        compiled.kernels = original
+
+
+def same_states(sizes: list[int], repeats: int, robot: RobotParams) -> None:
+    """Print, per size, the control step's cost per robot-step with the governor on and
+    off on the same states, and their ratio (median over repeats)."""
+    print(f"{'robots':>7} {'on us/robot-step':>17} {'off us/robot-step':>18} {'ratio':>6}")
+    for n in sizes:
+        steps = 500 if n <= 1000 else 100
+        on: list[float] = []
+        off: list[float] = []
+        for _ in range(repeats):
+            spent = {"on": 0.0, "off": 0.0}
+            with control_timed(spent):
+                run_once(n, steps, ControlParams(governor=True), robot)
+            on.append(spent["on"] / (steps + 1) / n)
+            off.append(spent["off"] / (steps + 1) / n)
+        ratio = statistics.median(a / b for a, b in zip(on, off))
+        print(f"{n:>7} {statistics.median(on) * 1e6:>17.3f} "
+              f"{statistics.median(off) * 1e6:>18.3f} {ratio:>6.2f}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[9, 100, 1000, 10000])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--governor-cost", action="store_true",
                         help="time each size with the safety governor on and off")
+    parser.add_argument("--same-states", action="store_true",
+                        help="with --governor-cost: time the control step alone, with and "
+                             "without the governor on the same states")
     parser.add_argument("--robot", metavar="FILE",
                         help="robot profile (robots/*.toml; default: the ideal robot)")
     args = parser.parse_args()
+    if args.same_states and not args.governor_cost:
+        parser.error("--same-states times the governor's cost: give --governor-cost too")
     robot = load_robot_profile(args.robot) if args.robot else RobotParams()
     if args.governor_cost:
         run_once(9, 10, ControlParams(), robot)        # compile before timing
-        governor_cost(args.sizes, args.repeats, robot)
+        (same_states if args.same_states else governor_cost)(args.sizes, args.repeats, robot)
         return
 
     sc = load_scenario(ROOT / "scenarios" / "paper.toml")
