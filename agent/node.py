@@ -117,7 +117,7 @@ class Agent:
                  clock: Clock, fixes: FixPort | None = None):
         """``fixes``: the robot's pose fixes, required when ``settings.pose`` is set."""
         self.s = settings
-        self._law_params = LawParams.of(settings.control, settings.robot)   # the law's view
+        self._derive()
         self.motor, self.swarm, self.clock = motor, swarm, clock
         self.mode = AgentMode.DISARMED
         self.failsafe: str | None = None
@@ -194,6 +194,16 @@ class Agent:
         """The value of runtime parameter ``name`` (agent.config.CONTROL_PARAMS)."""
         return float(getattr(self.s.control, _PARAMS[name].field))
 
+    def _derive(self) -> None:
+        """What the law and the governor's neighbour model read from the settings, derived
+        at start and again when a parameter changes (:meth:`set_param`): the law's view,
+        and the constants of a neighbour's disc (agent.config.disc_args, commitment; the
+        swarm's robots are alike)."""
+        s = self.s
+        self._law_params = LawParams.of(s.control, s.robot)
+        self._disc = disc_args(s.control, s.robot, s.timeouts.staleness)
+        self._commit = commitment(s.control, s.robot)
+
     def set_param(self, name: str, value: float) -> str | None:
         """Set runtime parameter ``name``; validated by the settings schema, in force from
         the next period. Returns why it was refused (the old value stays), or None. This is
@@ -207,7 +217,7 @@ class Agent:
             changes: dict[str, Any] = {spec.field: float(value)}
             control = dataclasses.replace(self.s.control, **changes)
             self.s = dataclasses.replace(self.s, control=control)
-            self._law_params = LawParams.of(control, self.s.robot)
+            self._derive()
         except ConfigError as exc:
             return f"{name} = {value:g} refused: {exc}"
         log.info("robot %d: %s = %g", self.s.robot_id, name, self.param(name))
@@ -422,8 +432,7 @@ class Agent:
         by this robot's position uncertainty."""
         s = self.s
         grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
-        half_base, disc = self._disc_args()
-        commit = self._commitment()
+        half_base, disc = self._disc
         staleness = s.timeouts.staleness
         x, y, me = pose[0], pose[1], s.robot_id
         reach = s.sensing_range + disc[2] * staleness
@@ -441,7 +450,7 @@ class Agent:
             trails = self.trail.since_each(m.stamp, age, SPLITS)
             full, half, east, north = neighbour_radii(-dx, -dy, m.theta, m.v, m.u, age,
                                                       trails, disc[0], disc[1], half_base,
-                                                      *disc[2:], *commit)
+                                                      *disc[2:], *self._commit)
             hx.append(m.x + east)
             hy.append(m.y + north)
             hr.append(full + grow)
@@ -454,14 +463,6 @@ class Agent:
             hh.append(-math.inf)
             hm.append(0.0)
         return hx, hy, hr, hh, hm
-
-    def _disc_args(self) -> tuple[float, tuple[float, float, float, float, float, float]]:
-        """agent.config.disc_args for this robot and its staleness limit."""
-        return disc_args(self.s.control, self.s.robot, self.s.timeouts.staleness)
-
-    def _commitment(self) -> tuple[float, float]:
-        """agent.config.commitment for this robot (the swarm's robots are alike)."""
-        return commitment(self.s.control, self.s.robot)
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],
@@ -480,11 +481,11 @@ class Agent:
                                 obs.radii.tolist()) if obs is not None else ([], [], []))
         obs_x += near.stale_x
         obs_y += near.stale_y
-        if near.stale:                  # (rare: the disc arguments only then)
-            half_base, disc = self._disc_args()
+        if near.stale:
+            half_base, disc = self._disc
             for i in near.stale:
                 m = recs[i].msg
-                obs_r.append(silent_radius(m.v, half_base * m.u, *disc, *self._commitment()))
+                obs_r.append(silent_radius(m.v, half_base * m.u, *disc, *self._commit))
         return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:

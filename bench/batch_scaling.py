@@ -71,17 +71,26 @@ def time_run(n: int, steps: int, repeats: int, robot: RobotParams) -> tuple[floa
     return statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
 
 
-def governor_cost(sizes: list[int], repeats: int, robot: RobotParams) -> None:
-    """Print, per size, the cost per robot-step with the governor on and off (runs
-    alternating) and the ratio of the medians."""
+def governor_cost(sizes: list[int], repeats: int, robot: RobotParams,
+                  same_states: bool = False) -> None:
+    """Print, per size, the cost per robot-step with the governor on and off and the ratio
+    of the medians: of whole runs, alternating, or (``same_states``) of the control step
+    alone on the states of runs with it (:func:`control_timed`)."""
     print(f"{'robots':>7} {'on us/robot-step':>17} {'off us/robot-step':>18} {'ratio':>6}")
     for n in sizes:
         steps = 500 if n <= 1000 else 100
         on: list[float] = []
         off: list[float] = []
         for _ in range(repeats):
-            on.append(run_once(n, steps, ControlParams(governor=True), robot)[0] / n)
-            off.append(run_once(n, steps, ControlParams(governor=False), robot)[0] / n)
+            if same_states:
+                spent = {"on": 0.0, "off": 0.0}
+                with control_timed(spent):
+                    run_once(n, steps, ControlParams(governor=True), robot)
+                on.append(spent["on"] / (steps + 1) / n)
+                off.append(spent["off"] / (steps + 1) / n)
+            else:
+                on.append(run_once(n, steps, ControlParams(governor=True), robot)[0] / n)
+                off.append(run_once(n, steps, ControlParams(governor=False), robot)[0] / n)
         m_on, m_off = statistics.median(on), statistics.median(off)
         print(f"{n:>7} {m_on * 1e6:>17.2f} {m_off * 1e6:>18.2f} {m_on / m_off:>6.2f}",
               flush=True)
@@ -121,25 +130,6 @@ def control_timed(spent: dict[str, float]) -> Iterator[None]:
         compiled.kernels = original
 
 
-def same_states(sizes: list[int], repeats: int, robot: RobotParams) -> None:
-    """Print, per size, the control step's cost per robot-step with the governor on and
-    off on the same states, and their ratio (median over repeats)."""
-    print(f"{'robots':>7} {'on us/robot-step':>17} {'off us/robot-step':>18} {'ratio':>6}")
-    for n in sizes:
-        steps = 500 if n <= 1000 else 100
-        on: list[float] = []
-        off: list[float] = []
-        for _ in range(repeats):
-            spent = {"on": 0.0, "off": 0.0}
-            with control_timed(spent):
-                run_once(n, steps, ControlParams(governor=True), robot)
-            on.append(spent["on"] / (steps + 1) / n)
-            off.append(spent["off"] / (steps + 1) / n)
-        ratio = statistics.median(a / b for a, b in zip(on, off))
-        print(f"{n:>7} {statistics.median(on) * 1e6:>17.3f} "
-              f"{statistics.median(off) * 1e6:>18.3f} {ratio:>6.2f}", flush=True)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[9, 100, 1000, 10000])
@@ -157,7 +147,7 @@ def main() -> None:
     robot = load_robot_profile(args.robot) if args.robot else RobotParams()
     if args.governor_cost:
         run_once(9, 10, ControlParams(), robot)        # compile before timing
-        (same_states if args.same_states else governor_cost)(args.sizes, args.repeats, robot)
+        governor_cost(args.sizes, args.repeats, robot, args.same_states)
         return
 
     sc = load_scenario(ROOT / "scenarios" / "paper.toml")
