@@ -27,6 +27,8 @@ if TYPE_CHECKING:
     # arrays when numba compiles this source (firmware_sim.compiled). Declared for the type
     # checker only, so a module numba compiles gains no run-time object.
     FloatSeq: TypeAlias = Sequence[float] | npt.NDArray[np.float64]
+    # Rows of floats: a sequence of lists in an agent, a 2-D float64 array compiled.
+    FloatRows: TypeAlias = Sequence[FloatSeq] | npt.NDArray[np.float64]
 
 EPS = 1e-9
 HALF_PI = math.pi / 2

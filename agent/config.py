@@ -184,12 +184,14 @@ def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: fl
     top = min(control.v_max, robot.v_wheel_max)
     free = 0.5 * (sensing_range - control.a) - top * data_age
     head_on = braking_speed(free, robot.a_max, control.period + robot.drive_latency)
-    # this robot's path since each split of the age, at the pace; the neighbour's report,
-    # data_age old, puts it that much behind
-    trails = [pace * data_age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
+    # this robot's motion over each split of the age, straight north at the pace; the
+    # neighbour's report, data_age old, puts it that much behind
+    paths = [pace * data_age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
+    inner = [pace * data_age * (SPLITS - k - 1) / SPLITS for k in range(SPLITS)]
+    trail = (paths, inner, [0.0] * SPLITS, paths, [0.0] * SPLITS, inner)
     half_base, disc = disc_args(control, robot, math.inf)
-    _, beside, _, _ = neighbour_radii(-sensing_range, trails[0], 0.5 * math.pi, pace, 0.0,
-                                      data_age, trails, disc[0], disc[1], half_base,
+    _, beside, _, _ = neighbour_radii(-sensing_range, paths[0], 0.5 * math.pi, pace, 0.0,
+                                      data_age, trail, disc[0], disc[1], half_base,
                                       *disc[2:], *commitment(control, robot))
     return SpeedEnvelope(top, head_on, sensing_range, data_age, pace, beside)
 

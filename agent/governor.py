@@ -10,15 +10,16 @@ stop in the free distance it owns, after a reaction time and at its braking dece
   robot (its speed and acceleration over the data age, at most the swarm's top speed, or
   less where its reported heading and turn rate say it was driving elsewhere:
   :func:`approach`; its acceleration is its law's speed-up where that is below its
-  wheels' ramp, docs/controller.md A17) and by this robot's own path over that age, the
-  two paired at each instant the neighbour may last have acted (:func:`neighbour_radii`).
-  It runs the same governor, so the free distance between the two is shared half and half:
-  its share is what it claimed when it last acted on data of this robot, and whatever
-  happened since (it may have died then) is on this robot, whose path over the data age
-  the disc counts in full. A silent neighbour (older than the staleness limit): a static
-  disc at its last known position grown by a and by what it could travel from its last
-  report until it must have stopped (its drivers' watchdog, then each wheel braking to
-  rest on its own: :func:`stopping`), taken in full.
+  wheels' ramp, docs/controller.md A17) and by this robot's own motion over that age,
+  the two paired at each instant the neighbour may last have acted
+  (:func:`neighbour_radii`). It runs the same governor, so the free distance between the
+  two is shared half and half: its share is what it claimed when it last acted on data of
+  this robot, and whatever happened since (it may have died then) is on this robot, whose
+  motion since then the disc counts as far as it brought it nearer (:func:`_own_share`).
+  A silent neighbour (older than the staleness limit): a static disc at its last known
+  position grown by a and by what it could travel from its last report until it must
+  have stopped (its drivers' watchdog, then each wheel braking to rest on its own:
+  :func:`stopping`), taken in full.
 * **Limit.** For a hazard at distance d the robot owns f = min(d - R, (d - R_half) / 2).
   Moving along its heading (or against it, when reversing) at speed v, with c the cosine
   of the angle between the hazard's bearing and the headings the robot can have while it
@@ -36,11 +37,13 @@ import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from agent.avoidance import FloatSeq
+    from agent.avoidance import FloatRows, FloatSeq
 
 EPS = 1e-9
 SPLITS = 4           # pieces of a neighbour's data age paired with this robot's path
 MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nearer the travel
+_STILL = ((0.0,),) * 6      # the trail of a robot that has not moved
+_BLIND = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)       # no line of sight (needed only with a trail)
 
 
 def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: float,
@@ -93,32 +96,38 @@ def _travel(speed: float, age: float, accel: float, up: float, lag: float,
     speed-up at most ``accel``)."""
     if math.isinf(accel):
         return top_speed * age
-    return _paired((0.0,), age, speed, 0.0, 0.0, accel, 0.0, top_speed, up, lag)[0]
+    return _paired(_STILL, age, speed, 0.0, 0.0, accel, 0.0, top_speed, up, lag)[0]
 
 
-def _paired(trails: FloatSeq, age: float, speed: float, turn_rate: float, a: float,
-            accel: float, half_base: float, top_speed: float, up: float, lag: float
+def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
+            a: float, accel: float, half_base: float, top_speed: float, up: float,
+            lag: float, sight: tuple[float, float, float, float, float, float] = _BLIND
             ) -> tuple[float, float]:
     """(around, reach) [m] of a neighbour heard from on wheels of finite ``accel``
     (arguments as :func:`neighbour_radii`, ``up`` its speed-up at most ``accel``): over the
-    splits of the ``age`` (>= 0) paired with this robot's ``trails``, the largest of a +
-    how far it can have travelled all round + the trail, and of a + the trail + rho
-    (:func:`swerve`; inf when ``half_base`` <= 0). Both formulas are written here once, in
+    splits of the ``age`` (>= 0) paired with this robot's ``trail``, the largest of a +
+    how far it can have travelled all round + this robot's share of its own motion, and
+    of a + rho (:func:`swerve`; inf when ``half_base`` <= 0) + that share
+    (:func:`_own_share`, seen along ``sight``: this robot's distance [m] to the report's
+    position and the unit vector toward it, its distance to the report's segment and the
+    unit vector toward the segment's far end). Both formulas are written here once, in
     one loop, as the agent runs it for every neighbour every period."""
     around = reach = -math.inf
-    splits = len(trails)
+    paths, inner = trail[0], trail[1]
+    splits = len(paths)
+    dist, sx, sy, off, ex, ey = sight
     speed, half_turn = abs(speed), 0.5 * abs(turn_rate)
     half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
     accel_lag2 = accel_lag * lag
     for k in range(splits):
-        if k + 1 < splits and trails[k] == trails[k + 1]:
-            continue    # the next split's end is later, its start no nearer: it dominates
+        if k + 1 < splits and paths[k] == inner[k]:
+            continue    # still within it: the next split's end is later, it dominates
         t = max(age * (k + 1) / splits, 0.0)
         # travel: its wheels within a ramp of the command it reported for the lag, then
         # its speed grown by at most up since (or, more loosely, the ramp all along)
         grow = min(top_speed * t, speed * t + min(half_accel * t * t + accel_lag * t,
                                                   half_up * t * t + accel_lag2))
-        around = max(around, a + grow + trails[k])
+        around = max(around, a + grow + _own_share(trail, k, sx, sy, sx, sy, dist, grow))
         rho = math.inf
         if half_base > 0.0:
             t2 = t * t
@@ -127,21 +136,78 @@ def _paired(trails: FloatSeq, age: float, speed: float, turn_rate: float, a: flo
                      + up * t2 * t / (6.0 * half_base))
             rho = min(half_accel * t2 + accel_lag * t + speed * swing,
                       half_up * t2 + accel_lag2 + (speed + accel_lag + up * t) * swing)
-        reach = max(reach, a + trails[k] + rho)
+        reach = max(reach, a + rho + _own_share(trail, k, sx, sy, ex, ey, off, rho))
     return around, reach
 
 
+def _own_share(trail: FloatRows, k: int, sx: float, sy: float, ex: float,
+               ey: float, dist: float, radius: float) -> float:
+    """How much [m] of the gap to a neighbour this robot's own motion takes from its half,
+    the neighbour having last acted within split ``k`` of its data's age, at a point
+    within ``radius`` [m] of a set this robot sees at ``dist`` [m] (its distance to the
+    set's nearest point) and between the unit directions (``sx``, ``sy``) and (``ex``,
+    ``ey``) (the shorter arc). ``trail`` as :func:`neighbour_radii`.
+
+    The neighbour then at q, this robot at p0, kept its stop within half of |q - p0|
+    beyond a; this robot, now at p with D = p - p0, must keep its stop within
+    |p - q| - |q - p0| / 2 - a / 2 (docs/controller.md A10). With r = |q - p| and x the
+    unit vector toward q, |q - p0| <= r + x.D + |D|^2 / (2 r): the share is at most
+    x.D + |D|^2 / (2 r), little where this robot moved across the line of sight, and
+    never more than |D|, at most its path since the split's start. p0 lies on a path of
+    length l between where it was at the split's start and end, so within the ellipse
+    of those foci and l: x.D is at most the larger of x.D at the two ends plus the
+    ellipse's half minor axis, and x is within the arc widened by asin(radius / dist)."""
+    path = trail[0][k]
+    if path <= 0.0:
+        return 0.0
+    clear = dist - radius                  # m, the least r
+    if clear <= EPS:
+        return path
+    start_x, start_y, end_x, end_y = trail[2][k], trail[3][k], trail[4][k], trail[5][k]
+    sin_b = min(radius / dist, 1.0)        # the set's points lie within asin(sin_b)
+    toward = max(_toward(start_x, start_y, sx, sy, ex, ey, sin_b),
+                 _toward(end_x, end_y, sx, sy, ex, ey, sin_b))
+    within = path - trail[1][k]            # m, walked within the split
+    chord_x, chord_y = start_x - end_x, start_y - end_y
+    bulge = 0.5 * math.sqrt(max(within * within - chord_x * chord_x - chord_y * chord_y,
+                                0.0))
+    return min(path, max(0.0, toward + bulge + 0.5 * path * path / clear))
+
+
+def _toward(dx: float, dy: float, sx: float, sy: float, ex: float, ey: float,
+            sin_b: float) -> float:
+    """The largest component [m] of (``dx``, ``dy``) [m] along a direction within
+    asin(``sin_b``) of the shorter arc from unit (``sx``, ``sy``) to unit (``ex``,
+    ``ey``)."""
+    size = math.sqrt(dx * dx + dy * dy)
+    if size <= 0.0:
+        return 0.0
+    arc = sx * ey - sy * ex
+    if (arc != 0.0 and arc * (sx * dy - sy * dx) >= 0.0 and arc * (dx * ey - dy * ex) >= 0.0
+            and dx * (sx + ex) + dy * (sy + ey) > 0.0):
+        return size                        # it points into the arc
+    cos_g = min(max(max(dx * sx + dy * sy, dx * ex + dy * ey) / size, -1.0), 1.0)
+    cos_b = math.sqrt(1.0 - sin_b * sin_b)
+    if cos_g >= cos_b:
+        return size
+    # beyond the widened arc by the angle g - b, g the angle to the arc's nearer end
+    return size * (cos_g * cos_b + math.sqrt(1.0 - cos_g * cos_g) * sin_b)
+
+
 def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
-                    turn_rate: float, age: float, trails: FloatSeq, a: float, accel: float,
+                    turn_rate: float, age: float, trail: FloatRows, a: float,
+                    accel: float,
                     half_base: float, top_speed: float, staleness: float, stop_time: float,
                     wheel_top: float, speed_up: float, lag: float
                     ) -> tuple[float, float, float, float]:
     """(full, half, east, north) for a neighbour reported at (x, y) = this robot's position
     less (``rel_x``, ``rel_y``) [m], along ``heading`` [rad] at ``speed`` [m/s] and
     ``turn_rate`` [rad/s], ``age`` [s] ago: the exclusion radii of :func:`neighbour_hazard`
-    of a disc centred (east, north) [m] from its reported position. ``trails`` [m]: this
-    robot's path since each of len(trails) instants splitting the age evenly, the stamp
-    first (the other arguments as there and :func:`approach`).
+    of a disc centred (east, north) [m] from its reported position. ``trail``: this
+    robot's motion over each of the splits of the age into equal pieces, the stamp's
+    first (agent.trail.Trail.splits): six rows, its path [m] since each split's start
+    and since its end, and its displacement (east, north) [m] since the start and since
+    the end (the other arguments as there and :func:`approach`).
 
     Heard from, on wheels of finite ramp, the neighbour can be now within rho of the
     segment from its reported position to where its report extrapolates to now
@@ -150,36 +216,44 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     is centred there, and the governor's cosine (:func:`speed_limits`) bounds the approach
     of a neighbour that drives on beside this robot, which a disc round its old, reported
     position does not (docs/controller.md A10). The neighbour last acted at some time
-    since its stamp, where its rho grows with that time and this robot's path since
-    shrinks: the two are paired over each split of the age (rho to its end, the path from
-    its start) and the largest sum counts. Where the all-round bound round the reported
-    position leaves more room, the disc keeps that room, still centred on the capsule's
-    nearest point; silent, the static disc round the reported position."""
+    since its stamp, where its rho grows with that time and this robot's motion since
+    shrinks: the two are paired over each split of the age (rho to its end, the motion
+    from its start) and the largest sum counts; the motion counts as far as it took this
+    robot toward where the neighbour can have been (:func:`_own_share`). Where the
+    all-round bound round the reported position leaves more room, the disc keeps that
+    room, still centred on the capsule's nearest point; silent, the static disc round the
+    reported position."""
     if age > staleness or math.isinf(accel):
         nearer = approach(rel_x, rel_y, heading, speed, turn_rate, age, accel, half_base,
                           speed_up, lag)
-        full, half = neighbour_hazard(speed, half_base * abs(turn_rate), age, trails[0], a,
-                                      accel, top_speed, staleness, stop_time, wheel_top,
-                                      nearer, speed_up, lag)
+        full, half = neighbour_hazard(speed, half_base * abs(turn_rate), age,
+                                      trail[0][0], a, accel, top_speed, staleness,
+                                      stop_time, wheel_top, nearer, speed_up, lag)
         return full, half, 0.0, 0.0
-    around, reach = _paired(trails, age, speed, turn_rate, a, accel, half_base, top_speed,
-                            min(speed_up, accel), lag)
-    east, north, off = _nearest_on_report(rel_x, rel_y, heading, speed, age)
-    room = max(off - reach, math.sqrt(rel_x * rel_x + rel_y * rel_y) - around)
+    east, north, off, seg_x, seg_y = _nearest_on_report(rel_x, rel_y, heading, speed, age)
+    dist = math.sqrt(rel_x * rel_x + rel_y * rel_y)
+    # unit vectors from this robot toward the report's position and its segment's far end
+    far_x, far_y = seg_x - rel_x, seg_y - rel_y
+    far = math.sqrt(far_x * far_x + far_y * far_y)
+    sight = (dist, -rel_x / max(dist, EPS), -rel_y / max(dist, EPS), off,
+             far_x / max(far, EPS), far_y / max(far, EPS))
+    around, reach = _paired(trail, age, speed, turn_rate, a, accel, half_base, top_speed,
+                            min(speed_up, accel), lag, sight)
+    room = max(off - reach, dist - around)
     return -math.inf, off - room, east, north
 
 
 def _nearest_on_report(rel_x: float, rel_y: float, heading: float, speed: float,
-                       age: float) -> tuple[float, float, float]:
-    """(east, north, off): the point [m] from a neighbour's reported position, on the
-    segment its report extrapolates along over ``age`` [s] (``speed`` [m/s] along
-    ``heading`` [rad]), nearest the point (``rel_x``, ``rel_y``) [m], and its distance
-    [m] from that point."""
+                       age: float) -> tuple[float, float, float, float, float]:
+    """(east, north, off, seg_x, seg_y): the point [m] from a neighbour's reported
+    position, on the segment (seg_x, seg_y) [m] its report extrapolates along over ``age``
+    [s] (``speed`` [m/s] along ``heading`` [rad]), nearest the point (``rel_x``,
+    ``rel_y``) [m], and its distance [m] from that point."""
     ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
     length2 = ex * ex + ey * ey
     t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
     ox, oy = rel_x - t * ex, rel_y - t * ey      # products, not ** (pow rounds otherwise)
-    return t * ex, t * ey, math.sqrt(ox * ox + oy * oy)
+    return t * ex, t * ey, math.sqrt(ox * ox + oy * oy), ex, ey
 
 
 def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
@@ -207,7 +281,7 @@ def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
     age = max(age, 0.0)
-    _, _, off = _nearest_on_report(rel_x, rel_y, heading, speed, age)
+    off = _nearest_on_report(rel_x, rel_y, heading, speed, age)[2]
     rho = swerve(speed, turn_rate, age, accel, half_base, speed_up, lag)
     return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho
 
@@ -218,7 +292,7 @@ def swerve(speed: float, turn_rate: float, age: float, accel: float, half_base: 
     report's extrapolation a neighbour can be ``age`` [s] after its stamp (inf: no bound)."""
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
-    return _paired((0.0,), age, speed, turn_rate, 0.0, accel, half_base, math.inf,
+    return _paired(_STILL, age, speed, turn_rate, 0.0, accel, half_base, math.inf,
                    min(speed_up, accel), lag)[1]
 
 

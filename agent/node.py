@@ -447,9 +447,9 @@ class Agent:
             if rid == me or dx * dx + dy * dy > reach * reach:
                 continue
             age = now_w - m.stamp
-            trails = self.trail.since_each(m.stamp, age, SPLITS)
+            moved = self.trail.splits(m.stamp, age, SPLITS)
             full, half, east, north = neighbour_radii(-dx, -dy, m.theta, m.v, m.u, age,
-                                                      trails, disc[0], disc[1], half_base,
+                                                      moved, disc[0], disc[1], half_base,
                                                       *disc[2:], *self._commit)
             hx.append(m.x + east)
             hy.append(m.y + north)

@@ -1,47 +1,60 @@
-"""The robot's own path over the last seconds: how far it has gone since a time.
+"""The robot's own motion over the last seconds: how far it has gone, and where, since a time.
 
 The safety governor takes a neighbour's data of age t as that neighbour's share of the gap
-between them when it last acted, and counts this robot's own path since that instant
-(:func:`agent.governor.neighbour_radii`). The path is that of the pose the robot believes
+between them when it last acted, and counts this robot's own motion since that instant
+(:func:`agent.governor.neighbour_radii`). The motion is that of the pose the robot believes
 (odometry, fused fixes): a jump of the estimate counts as travel.
 """
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 
 
 class Trail:
-    """The believed positions of the last ``span`` [s]: their times [s] and the path [m]
-    walked through them."""
+    """The believed positions of the last ``span`` [s]: their times [s], the positions [m]
+    and the path [m] walked through them."""
 
     def __init__(self, span: float):
         self.span = span
         self._t: list[float] = []
         self._path: list[float] = []        # m, cumulative, from the first position
-        self._x = self._y = math.nan
+        self._x: list[float] = []
+        self._y: list[float] = []
 
     def record(self, t: float, x: float, y: float) -> None:
         """The position (x, y) [m] at time t [s] (non-decreasing)."""
-        step = 0.0 if math.isnan(self._x) else math.hypot(x - self._x, y - self._y)
-        self._x, self._y = x, y
+        step = math.hypot(x - self._x[-1], y - self._y[-1]) if self._x else 0.0
         self._t.append(t)
         self._path.append((self._path[-1] if self._path else 0.0) + step)
+        self._x.append(x)
+        self._y.append(y)
         if self._t[0] < t - 2.0 * self.span:      # drop the old half now and then
             cut = bisect_right(self._t, t - self.span) - 1
-            del self._t[:cut], self._path[:cut]
+            del self._t[:cut], self._path[:cut], self._x[:cut], self._y[:cut]
 
-    def since(self, t: float) -> float:
-        """The path [m] from the last position recorded at or before t [s] (the first
-        one, if none) to the newest (0 before any)."""
-        return self.since_each(t, 0.0, 1)[0]
-
-    def since_each(self, start: float, span: float, pieces: int) -> list[float]:
-        """:meth:`since` at each of the instants start + span k / pieces [s], k = 0 ..
-        pieces - 1 (one call for the splits of a neighbour's data age)."""
-        t, path = self._t, self._path
+    def splits(self, start: float, span: float, pieces: int
+               ) -> tuple[list[float], list[float], list[float], list[float], list[float],
+                          list[float]]:
+        """This robot's motion over each piece k = 0 .. ``pieces`` - 1 of the time from
+        ``start`` [s], ``span`` [s] long, split evenly, as
+        :func:`agent.governor.neighbour_radii` takes it: the path [m] to the newest
+        position from the last position recorded at or before the piece's start, and from
+        the first at or after its end (the newest, if none); the displacement east and
+        north [m] to the newest position from each of those two. All zero before any."""
+        t, path, xs, ys = self._t, self._path, self._x, self._y
         if not path:
-            return [0.0] * pieces
-        last = path[-1]
-        return [last - path[max(bisect_right(t, start + span * k / pieces) - 1, 0)]
-                for k in range(pieces)]
+            return ([0.0] * pieces, [0.0] * pieces, [0.0] * pieces, [0.0] * pieces,
+                    [0.0] * pieces, [0.0] * pieces)
+        last, newest, x, y = path[-1], len(path) - 1, xs[-1], ys[-1]
+        paths, inner, start_x, start_y, end_x, end_y = [], [], [], [], [], []
+        for k in range(pieces):
+            i = max(bisect_right(t, start + span * k / pieces) - 1, 0)
+            j = min(bisect_left(t, start + span * (k + 1) / pieces), newest)
+            paths.append(last - path[i])
+            inner.append(last - path[j])
+            start_x.append(x - xs[i])
+            start_y.append(y - ys[i])
+            end_x.append(x - xs[j])
+            end_y.append(y - ys[j])
+        return paths, inner, start_x, start_y, end_x, end_y

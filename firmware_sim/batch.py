@@ -293,11 +293,11 @@ class _WorldState:
         self.bad = np.zeros(n, np.int64)
         self.slip = np.zeros((n, 2))
         self.seen = np.zeros((n, 3))
-        # the cumulative path [m] of each robot's believed position, a ring over its last
-        # periods (swarm_step.control; at rest: none)
-        self.last_xy = pose[:, :2].copy()
+        # each robot's believed position (x, y) [m] and the cumulative path [m] through
+        # them, a ring over its last periods (swarm_step.control; at rest before)
         self.path_ring = np.zeros((1 if self.truth else
-                                   int(math.ceil(self.staleness / period)) + 2, n))
+                                   int(math.ceil(self.staleness / period)) + 2, n, 3))
+        self.path_ring[:, :, :2] = pose[:, :2]
 
     def before_control(self, step: int, t: float, pose: np.ndarray, cmd: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -312,10 +312,10 @@ class _WorldState:
         if self.pose_source is not None:
             own = self.pose_source.step(step, t, self.est, pose)
         ring = len(self.path_ring)
-        np.add(self.path_ring[(step - 1) % ring], np.hypot(own[:, 0] - self.last_xy[:, 0],
-                                                           own[:, 1] - self.last_xy[:, 1]),
-               out=self.path_ring[step % ring])
-        self.last_xy[:] = own[:, :2]
+        last, now = self.path_ring[(step - 1) % ring], self.path_ring[step % ring]
+        now[:, :2] = own[:, :2]
+        np.add(last[:, 2], np.hypot(now[:, 0] - last[:, 0], now[:, 1] - last[:, 1]),
+               out=now[:, 2])
         return own, self.seen, self.view, self.path_ring, np.array([0, self.world.seed, step],
                                                                     np.int64)
 

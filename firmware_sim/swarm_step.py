@@ -178,7 +178,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     o_k = np.empty(cap, np.int64)
     h_x, h_y, h_r = np.empty(2 * cap), np.empty(2 * cap), np.empty(2 * cap)
     h_h, h_m = np.empty(2 * cap), np.empty(2 * cap)
-    trails = np.empty(SPLITS)
+    trail = np.empty((6, SPLITS))     # agent.governor.neighbour_radii's own motion
     for i in range(lo, hi):
         x, y = own[i, 0], own[i, 1]
         m = sense_neighbours(i, x, y, sorted_seen, sensing_range, seen_grid, cap, nbr_x,
@@ -200,17 +200,28 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             if not truth and seen[j, 2] == NONE:
                 continue
             age = t - view[j, 5]
-            # this robot's path since each split of the age: from the period at or before
-            # (neighbours heard in the same period share it)
+            # this robot's motion over each split of the age: from the period at or before
+            # its start, and at or after its end (neighbours heard in the same period share
+            # it)
             if age != trails_age:
                 trails_age = age
+                now = path[step % ring, i]
                 for piece in range(SPLITS):
                     since = age * (SPLITS - piece) / SPLITS
                     ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
-                    trails[piece] = path[step % ring, i] - path[(step - ago) % ring, i]
+                    start = path[(step - ago) % ring, i]
+                    ago = min(max(int(math.floor((since - age / SPLITS) / period + 1e-9)),
+                                  0), ring - 1)
+                    end = path[(step - ago) % ring, i]
+                    trail[0, piece] = now[2] - start[2]
+                    trail[1, piece] = now[2] - end[2]
+                    trail[2, piece] = now[0] - start[0]
+                    trail[3, piece] = now[1] - start[1]
+                    trail[4, piece] = now[0] - end[0]
+                    trail[5, piece] = now[1] - end[1]
             full, half, east, north = neighbour_radii(x - view[j, 0], y - view[j, 1],
                                                       view[j, 2], view[j, 3], view[j, 4],
-                                                      age, trails, a, p.accel,
+                                                      age, trail, a, p.accel,
                                                       0.5 * p.wheel_base, top_speed,
                                                       staleness, stop_time, wheel_top,
                                                       p.speed_up, lag)
@@ -315,20 +326,19 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
     (N, 4 with a pose source: and its position uncertainty [m], which grows every hazard);
     seen (N, 3) where the robots believe the others are: x, y [m] and NONE, FRESH or STALE
     (:mod:`firmware_sim.world_step`); view (N, 6) the states they last received from each
-    other (x, y, theta, v, u, stamp [s]), for the governor's hazards; path (K, N) [m] the
-    cumulative path of each robot's believed position, a ring over its last K periods
-    (period number p in row p % K; rows not written yet 0, the start; older data counts
-    K - 1 periods); world_i = (1 when own and seen are the truth and detections exact,
-    seed, period number), world_f = (detection noise [m], detection dropout, staleness [s],
-    stop time of a dead agent [s], top speed [m/s]) (:func:`agent.governor.neighbour_hazard`; a
-    stale neighbour is an obstacle of :func:`agent.governor.silent_radius`). Memory of
-    :class:`LawMemory` as floats (N, 7): prev_ex, prev_ey, center_x, center_y, radius,
-    wheel_r, wheel_l, and
-    ints (N, 4): has_prev, avoiding, side, passing; held (N, cap + 1) the indices of the robots
+    other (x, y, theta, v, u, stamp [s]), for the governor's hazards; path (K, N, 3) [m]
+    each robot's believed position x, y and the cumulative path through them, a ring over
+    its last K periods (period number p in row p % K; rows not written yet the start;
+    older data counts K - 1 periods); world_i = (1 when own and seen are the truth and
+    detections exact, seed, period number), world_f = (detection noise [m], detection
+    dropout, staleness [s], stop time of a dead agent [s], top speed [m/s])
+    (:func:`agent.governor.neighbour_hazard`; a stale neighbour is an obstacle of
+    :func:`agent.governor.silent_radius`). Memory of :class:`LawMemory` as floats
+    (N, 7): prev_ex, prev_ey, center_x, center_y, radius, wheel_r, wheel_l, and ints
+    (N, 4): has_prev, avoiding, side, passing; held (N, cap + 1) the indices of the robots
     each robot's pairs with which were active (:func:`agent.law.pair_active`), -1 ending
-    the list; offsets (N, 2) [m] and motion (5,) = centre0 x,
-    y [m], velocity x, y [m/s], omega [rad/s] of the formation; obs (K, 3) = obstacle
-    centre x, y and radius [m].
+    the list; offsets (N, 2) [m] and motion (5,) = centre0 x, y [m], velocity x, y [m/s],
+    omega [rad/s] of the formation; obs (K, 3) = obstacle centre x, y and radius [m].
     Out: out_cmd (N, 4) = v [m/s], u [rad/s], mode, the speed the governor allowed when it
     acted [m/s] (inf: it did not); out_ref (N, 4) = p_d, p_d_dot; the new memory and held
     lists;

@@ -281,14 +281,15 @@ def test_a_cart_brakes_for_a_dead_robot_through_its_governor():
 
 
 def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
-    """A robot reported still 0.3 s ago (older than a period, within the staleness limit):
-    its shared disc is a, then what it can have travelled by each split of those 0.3 s
-    and the path this agent drove since the split began, read off its own odometry, the
-    largest of the pairs (the first holds the whole path)."""
+    """A robot reported still 0.3 s ago (older than a period, within the staleness limit),
+    straight ahead of this agent: its shared disc is a, then what it can have travelled by
+    each split of those 0.3 s and the path this agent drove toward it since the split
+    began, read off its own odometry, the largest of the pairs (the first holds the whole
+    path)."""
     cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
                        drive_latency=0.02)
-    clock, net, (agent, other) = make_swarm([(0.0, 0.0, 0.0), (0.0, 6.0, 0.0)],
-                                            [(30.0, 0.0), (0.0, 6.0)], robot=cart)
+    clock, net, (agent, other) = make_swarm([(0.0, 0.0, 0.0), (8.0, 0.0, 0.0)],
+                                            [(30.0, 0.0), (8.0, 0.0)], robot=cart)
     agent.arm()
     agent.set_mode(AgentMode.FORMATION)
     for _ in range(50):                          # 1 s: up to speed along x
@@ -311,8 +312,8 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
     def travel(t: float) -> float:
         return 0.5 * cart.a_max * t ** 2 + cart.a_max * lag ** 2
 
-    pairs = [travel(age * (k + 1) / SPLITS) + agent.trail.since(stamp + age * k / SPLITS)
-             for k in range(SPLITS)]
+    paths = agent.trail.splits(stamp, age, SPLITS)[0]
+    pairs = [travel(age * (k + 1) / SPLITS) + paths[k] for k in range(SPLITS)]
     assert pairs[0] == pytest.approx(travel(age / SPLITS) + driven, rel=1e-6)
     assert hr == [-math.inf]
     assert hh == [pytest.approx(agent.s.control.a + max(pairs), rel=1e-6)]

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from agent.governor import (
     MOVING_PAD,
     SPLITS,
+    _own_share,
     _paired,
     approach,
     braking_speed,
@@ -71,6 +72,52 @@ def test_sharing_with_old_data_keeps_two_stops_apart_should_the_neighbour_die(pt
     assert dist(p, q) - own - theirs >= A - 1e-9
 
 
+@settings(max_examples=3000, deadline=None)
+@given(pts=st.lists(st.floats(-6.0, 6.0), min_size=4, max_size=4),
+       moves=st.lists(st.floats(-3.0, 3.0), min_size=8, max_size=8),
+       g=st.floats(0.0, 2.0), turn=st.floats(-math.pi, math.pi),
+       fr=st.lists(st.floats(0.0, 1.0), min_size=4, max_size=4))
+def test_this_robot_s_share_of_its_own_motion_keeps_two_stops_apart(pts, moves, g, turn, fr):
+    """The same on points with this robot's motion counted by its direction
+    (:func:`agent.governor._own_share`): the neighbour last acted at q, within g of a
+    segment from s to e, while this robot was at p0, on its way (two legs, by a bend)
+    from where it was at the split's start to where it was at its end, w; since then it
+    went to p. It keeps its stop within half of its distance to the segment beyond a, g
+    and its share; the two stops are a apart."""
+    s, p = pts[0:2], pts[2:4]
+    dist = math.dist
+    e = (s[0] + moves[0], s[1] + moves[1])
+    on = (s[0] + fr[0] * moves[0], s[1] + fr[0] * moves[1])
+    q = (on[0] + g * fr[1] * math.cos(turn), on[1] + g * fr[1] * math.sin(turn))
+    start = (p[0] + moves[2], p[1] + moves[3])
+    w = (start[0] - moves[4] / 3.0 * moves[2], start[1] - moves[5] / 3.0 * moves[3])
+    bend = (0.5 * (start[0] + w[0]) + moves[6] / 3.0, 0.5 * (start[1] + w[1]) + moves[7] / 3.0)
+    leg = (start, bend) if fr[2] < 0.5 else (bend, w)
+    p0 = (leg[0][0] + fr[3] * (leg[1][0] - leg[0][0]), leg[0][1] + fr[3] * (leg[1][1] - leg[0][1]))
+    within = dist(start, bend) + dist(bend, w)        # path from start to w
+    path = within + dist(w, p)                        # and on to p
+    off = _segment_distance(p, s, e)
+    units = [((pt[0] - p[0]) / max(dist(pt, p), 1e-12), (pt[1] - p[1]) / max(dist(pt, p), 1e-12))
+             for pt in (s, e)]
+    share = _own_share(([path], [path - within], [p[0] - start[0]], [p[1] - start[1]],
+                        [p[0] - w[0]], [p[1] - w[1]]), 0, *units[0], *units[1], off, g)
+    assert 0.0 <= share <= path
+    own = 0.5 * (off - A - g - share)
+    theirs = 0.5 * (dist(q, p0) - A)
+    if own < 0.0 or theirs < 0.0:
+        return
+    assert dist(p, q) - own - theirs >= A - 1e-9
+
+
+def _segment_distance(p: tuple, s: tuple, e: tuple) -> float:
+    """The distance [m] from point p to the segment from s to e."""
+    ex, ey = e[0] - s[0], e[1] - s[1]
+    length2 = ex * ex + ey * ey
+    t = 0.0 if length2 <= 0.0 else min(max(((p[0] - s[0]) * ex + (p[1] - s[1]) * ey)
+                                           / length2, 0.0), 1.0)
+    return math.dist(p, (s[0] + t * ex, s[1] + t * ey))
+
+
 def _drive(v: float, u: float, accel: float, half: float, age: float, plan: list, steps: int
            ) -> list[tuple[float, float]]:
     """Positions [m] every age/steps of a robot reported at the origin along x at v and u,
@@ -116,9 +163,12 @@ def test_pairing_the_neighbour_s_travel_with_this_robot_s_path_keeps_stops_apart
     walked = [0.0]
     for k in range(steps, 0, -1):                 # path from each instant to the end
         walked.insert(0, walked[0] + math.dist(p[k], p[k - 1]))
-    trails = [walked[round(steps * k / SPLITS)] for k in range(SPLITS)]
+    ends = [round(steps * k / SPLITS) for k in range(SPLITS + 1)]
     now = p[-1]
-    full, half, east, north = neighbour_radii(now[0], now[1], 0.0, v, u, age, trails, A,
+    trail = ([walked[i] for i in ends[:-1]], [walked[i] for i in ends[1:]],
+             [now[0] - p[i][0] for i in ends[:-1]], [now[1] - p[i][1] for i in ends[:-1]],
+             [now[0] - p[i][0] for i in ends[1:]], [now[1] - p[i][1] for i in ends[1:]])
+    full, half, east, north = neighbour_radii(now[0], now[1], 0.0, v, u, age, trail, A,
                                               ACCEL, half_base, TOP, STALE, STOP, 8.0,
                                               math.inf, 0.0)
     own = 0.5 * (math.dist(now, (east, north)) - half)
@@ -140,9 +190,9 @@ def test_a_neighbour_driving_on_beside_this_robot_is_met_where_it_is_now():
     v_n, heading_n, now_n = 5.1, 2.45, (2.79, 2.29)           # the neighbour, now
     reported = (now_n[0] - v_n * age * math.cos(heading_n),
                 now_n[1] - v_n * age * math.sin(heading_n))
-    trails = [speed * age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
+    trail = _straight(speed, heading, age)
     full, half, east, north = neighbour_radii(-reported[0], -reported[1], heading_n, v_n,
-                                              0.0, age, trails, 1.0, 6.0, 0.25, 6.0, 0.8,
+                                              0.0, age, trail, 1.0, 6.0, 0.25, 6.0, 0.8,
                                               0.13, 6.0, 6.0, 0.03)
     centre = (reported[0] + east, reported[1] + north)
     assert centre == pytest.approx(now_n, abs=1e-9)
@@ -160,18 +210,44 @@ def test_a_neighbour_met_head_on_with_old_data_is_paired_with_this_robot_s_path(
     robot's path are not both counted in full (0.75 m each), only as far as they can add up
     at one instant the neighbour last acted; with one split, in full."""
     age, speed = 0.5, 1.5
-    trails = [speed * age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
+    trail = _straight(speed, 0.0, age)
     args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0)
 
-    def room(trails):        # m, from this robot to the edge of the neighbour's disc
-        _, half, east, north = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trails,
+    def room(trail):         # m, from this robot to the edge of the neighbour's disc
+        _, half, east, north = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trail,
                                                *args)
         return math.hypot(-6.0 - east, north) - half
 
     travel = min(approach(-6.0, 0.0, math.pi, speed, 0.0, age, ACCEL, 0.3),
                  speed * age + 0.5 * ACCEL * age * age)
-    assert room(trails[:1]) == pytest.approx(6.0 - (A + travel + speed * age))  # 2.75 m
-    assert room(trails) > room(trails[:1]) + 0.5
+    assert room(_straight(speed, 0.0, age, 1)) == pytest.approx(
+        6.0 - (A + travel + speed * age))                                         # 2.75 m
+    assert room(trail) > room(_straight(speed, 0.0, age, 1)) + 0.5
+
+
+def _straight(speed: float, heading: float, age: float, splits: int = SPLITS) -> tuple:
+    """The trail (agent.governor.neighbour_radii) of a robot driving straight along
+    ``heading`` [rad] at ``speed`` [m/s] over ``age`` [s] split ``splits`` ways."""
+    paths = [speed * age * (splits - k) / splits for k in range(splits)]
+    inner = [speed * age * (splits - k - 1) / splits for k in range(splits)]
+    return (paths, inner, [d * math.cos(heading) for d in paths],
+            [d * math.sin(heading) for d in paths], [d * math.cos(heading) for d in inner],
+            [d * math.sin(heading) for d in inner])
+
+
+def test_a_robot_driving_beside_a_neighbour_counts_little_of_its_own_motion():
+    """Side by side 5 m apart at 1.5 m/s with data 0.5 s old: this robot moved along the
+    line the neighbour drives, not toward it, and its disc of the neighbour is smaller than
+    one that counts its path in full; driving straight at it, the same."""
+    age, speed = 0.5, 1.5
+    args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0)
+
+    def half(heading):       # the neighbour 5 m north, both driving east
+        trail = _straight(speed, heading, age)
+        return neighbour_radii(speed * age, -5.0, 0.0, speed, 0.0, age, trail, *args)[1]
+
+    print(half(0.0), half(0.5 * math.pi))
+    assert half(0.0) < half(0.5 * math.pi) - 0.2
 
 
 @settings(max_examples=300, deadline=None)
@@ -439,10 +515,13 @@ def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path
     """The discs are the largest over the splits of the age, each split's reach to its end
     paired with this robot's path from its start: the same, bit for bit, as pairing each
     split alone (the splits a later one dominates, with the same path, are skipped)."""
-    trails = [sum(path[k:]) for k in range(SPLITS)]     # the path since each split's start
-    got = _paired(trails, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04)
-    alone = [_paired([trails[k]], age * (k + 1) / SPLITS, speed, turn_rate, A, ACCEL, 0.4,
-                     TOP, up, 0.04) for k in range(SPLITS)]
+    paths = [sum(path[k:]) for k in range(SPLITS)]     # the path since each split's start
+    trail = (paths, paths[1:] + [0.0], paths, [0.0] * SPLITS, paths[1:] + [0.0],
+             [0.0] * SPLITS)                                   # straight along x
+    sight = (5.0, 1.0, 0.0, 4.5, 0.8, 0.6)
+    got = _paired(trail, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04, sight)
+    alone = [_paired([[row[k]] for row in trail], age * (k + 1) / SPLITS, speed, turn_rate,
+                     A, ACCEL, 0.4, TOP, up, 0.04, sight) for k in range(SPLITS)]
     assert got == (max(r[0] for r in alone), max(r[1] for r in alone))
 
 

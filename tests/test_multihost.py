@@ -495,9 +495,10 @@ def test_link_delay_on_one_robot(tmp_path):
     judge_liveness(run["cpu_steal"], missed_share(run, FAULT_RUN))
     assert not any(st["failsafe"] for st in agents.values()), health(run)
     assert m["converged"], brief(m)
-    # the fault was felt: robot 2's states reached the ground and its neighbours late, theirs
-    # reached it late (fault-free, the neighbour-state age p99 is 16-21 ms)
+    # the fault was felt: robot 2's states reached the ground and robot 3 late, robot 3's
+    # reached it late (fault-free, the neighbour-state age p99 is 16-21 ms). Robot 1 drives
+    # ahead of the held-back robot 2, beyond its 8 m sensing range, while the fault lasts
     on, off = run["fault_on"]
     assert statistics.median(window(run["uplink_ms"][2], on + 0.1, off - 0.1)) > 0.9 * delay.ms
-    for r in (1, 2, 3):
+    for r in (2, 3):
         assert ages[r]["p99"] > 0.75 * delay.ms, ages

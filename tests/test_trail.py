@@ -1,5 +1,5 @@
-"""The robot's own path over the last seconds (agent.trail), which the governor counts in
-full for a neighbour's data of that age."""
+"""The robot's own motion over the last seconds (agent.trail), which the governor pairs
+with a neighbour's data of that age."""
 import math
 
 import pytest
@@ -7,35 +7,48 @@ import pytest
 from agent.trail import Trail
 
 
+def since(trail, t):
+    """The path [m] from the position at or before t [s] to the newest."""
+    return trail.splits(t, 0.0, 1)[0][0]
+
+
 def test_the_path_since_a_time_is_walked_from_the_position_at_or_before_it():
     trail = Trail(span=1.0)
-    assert trail.since(0.0) == 0.0                       # nothing recorded yet
+    assert since(trail, 0.0) == 0.0                       # nothing recorded yet
     for k, (x, y) in enumerate([(0, 0), (3, 4), (3, 4), (6, 8), (6, 0)]):
         trail.record(0.1 * k, x, y)
-    assert trail.since(0.4) == 0.0                       # the newest position
-    assert trail.since(0.35) == pytest.approx(8.0)       # from (6, 8): at or before
-    assert trail.since(0.1) == pytest.approx(5.0 + 8.0)
-    assert trail.since(-5.0) == pytest.approx(18.0)      # before the first: all of it
+    assert since(trail, 0.4) == 0.0                       # the newest position
+    assert since(trail, 0.35) == pytest.approx(8.0)       # from (6, 8): at or before
+    assert since(trail, 0.1) == pytest.approx(5.0 + 8.0)
+    assert since(trail, -5.0) == pytest.approx(18.0)      # before the first: all of it
 
 
 def test_it_keeps_its_span_and_no_more():
     trail = Trail(span=0.5)
     for k in range(1000):                                # 1 m/s along x, 100 Hz
         trail.record(0.01 * k, 0.01 * k, 0.0)
-    assert trail.since(9.99 - 0.5) == pytest.approx(0.5)
-    assert trail.since(9.99 - 0.25) == pytest.approx(0.25)
+    assert since(trail, 9.99 - 0.5) == pytest.approx(0.5)
+    assert since(trail, 9.99 - 0.25) == pytest.approx(0.25)
     assert len(trail._t) <= 2 * 50 + 2                   # trimmed, not growing
     # a jump of the estimate (a fix) counts as travel
     trail.record(10.0, 9.99, 3.0)
-    assert trail.since(9.99) == pytest.approx(3.0)
-    assert not math.isnan(trail.since(0.0))
+    assert since(trail, 9.99) == pytest.approx(3.0)
+    assert not math.isnan(since(trail, 0.0))
 
 
-def test_the_paths_since_the_splits_of_an_age_are_those_since_each_instant():
+def test_the_splits_of_an_age_give_the_motion_since_each_piece_s_start_and_end():
     trail = Trail(span=1.0)
-    assert trail.since_each(0.0, 0.3, 4) == [0.0] * 4    # nothing recorded yet
+    assert trail.splits(0.0, 0.3, 4) == ([0.0] * 4,) * 6     # nothing recorded yet
     for k, (x, y) in enumerate([(0, 0), (3, 4), (3, 4), (6, 8), (6, 0)]):
         trail.record(0.1 * k, x, y)
-    assert trail.since_each(0.05, 0.3, 3) == [trail.since(0.05), trail.since(0.15),
-                                              trail.since(0.25)]
-    assert trail.since_each(0.05, 0.3, 3) == pytest.approx([18.0, 13.0, 13.0])
+    paths, inner, east, north, end_east, end_north = trail.splits(0.05, 0.3, 3)
+    assert paths == [since(trail, 0.05), since(trail, 0.15), since(trail, 0.25)]
+    assert paths == pytest.approx([18.0, 13.0, 13.0])
+    # from the first position at or after each piece's end: 0.2 (3, 4), 0.3 (6, 8), 0.4
+    assert inner == pytest.approx([13.0, 8.0, 0.0])
+    # the newest position (6, 0) less that at each start: (0, 0), (3, 4), (3, 4)
+    assert east == pytest.approx([6.0, 3.0, 3.0])
+    assert north == pytest.approx([0.0, -4.0, -4.0])
+    # and at each end: (3, 4), (6, 8), (6, 0)
+    assert end_east == pytest.approx([3.0, 0.0, 0.0])
+    assert end_north == pytest.approx([-4.0, -8.0, 0.0])
