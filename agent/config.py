@@ -100,6 +100,13 @@ class RobotParams:
             "and each wheel's share of its turn grow by at most this (braking still takes "
             "the full ramp). Its neighbours count on it when its data is old, so a swarm "
             "sets it alike on every robot (0: the wheels' ramp)")
+    turn_up: float = setting(
+        0.0, unit="rad/s^2", lo=0.0,
+        doc="the most the law speeds up the robot's turn rate, below what its speed-up "
+            "allows (2 speed_up / wheel_base): its wheels' half difference grows by at "
+            "most this times half the wheel base (turning slower takes the full ramp). "
+            "Its neighbours count on it when its data is old, so a swarm sets it alike on "
+            "every robot (0: by speed_up)")
     wheel_slip: float = setting(
         0.0, unit="1", lo=0.0, hi=0.5,
         doc="the most a wheel may slip (the fraction of its turn that does not move the "
@@ -125,6 +132,13 @@ class RobotParams:
         """Largest acceleration [m/s^2] the law speeds the robot up by (``speed_up``, at
         most :attr:`a_max`)."""
         return min(self.speed_up, self.a_max) if self.speed_up > 0.0 else self.a_max
+
+    @property
+    def a_turn_up(self) -> float:
+        """Largest acceleration [m/s^2] the law speeds up the wheels' half difference by
+        (``turn_up`` times half the wheel base, at most :attr:`a_up`)."""
+        up = self.a_up
+        return min(0.5 * self.turn_up * self.wheel_base, up) if self.turn_up > 0.0 else up
 
 
 @dataclass(frozen=True)
@@ -167,10 +181,11 @@ def disc_args(control: ControlParams, robot: RobotParams, staleness: float
                                     robot.v_wheel_max)
 
 
-def commitment(control: ControlParams, robot: RobotParams) -> tuple[float, float]:
-    """(speed-up [m/s^2], lag [s]): how fast a neighbour's law speeds it up and how late its
-    wheels follow the command it reports (agent.governor.approach, A17)."""
-    return robot.a_up, control.period + robot.drive_latency
+def commitment(control: ControlParams, robot: RobotParams) -> tuple[float, float, float]:
+    """(speed-up [m/s^2], lag [s], turn speed-up [m/s^2]): how fast a neighbour's law
+    speeds it up, how late its wheels follow the command it reports, and how fast its law
+    speeds up its wheels' half difference (agent.governor.approach, A17)."""
+    return robot.a_up, control.period + robot.drive_latency, robot.a_turn_up
 
 
 def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: float,

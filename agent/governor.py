@@ -49,7 +49,8 @@ _BLIND = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)       # no line of sight (needed only wi
 def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: float,
                      accel: float, top_speed: float, staleness: float, stop_time: float,
                      wheel_top: float = math.inf, nearer: float = math.inf,
-                     speed_up: float = math.inf, lag: float = 0.0) -> tuple[float, float]:
+                     speed_up: float = math.inf, lag: float = 0.0,
+                     turn_up: float = math.inf) -> tuple[float, float]:
     """(full, half): the exclusion radii [m] around a neighbour's reported position, last
     reported moving at ``speed`` [m/s] and turning with its wheels ``turn`` [m/s] apart
     (half the difference of their ground speeds: |u| times half the wheel base) ``age`` [s]
@@ -58,7 +59,9 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
     ``accel`` [m/s^2] (its wheels' ramp), ``speed_up`` [m/s^2] (the most its law speeds
     it up: its speed and its wheels' half difference) and ``top_speed`` [m/s] bound how its
     speed can have changed since, ``lag`` [s] how late its wheels follow the commands it
-    reports (a period and the drive latency), ``wheel_top`` [m/s] each wheel's ground speed
+    reports (a period and the drive latency), ``turn_up`` [m/s^2] the most its law speeds
+    up its wheels' half difference (at most speed_up), ``wheel_top`` [m/s] each wheel's
+    ground speed
     (so the wheels are at most wheel_top - speed apart); ``stop_time`` [s] is how long a
     dead agent's drivers keep going before they brake (watchdog and drive latency).
     ``nearer`` [m]: how much nearer to this robot than its reported position it can be by
@@ -85,7 +88,8 @@ def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: flo
         now = min(now, speed + accel * lag + up * age)
         # each wheel's speed changes at most accel and stays within wheel_top; the longest
         # stop is at the fastest speed, the wheels as far apart as that leaves them
-        turn_now = min(turn + accel * lag + up * age, max(wheel_top - now, 0.0))
+        turn_now = min(turn + accel * lag + min(up, turn_up) * age,
+                       max(wheel_top - now, 0.0))
     return a + grow + stopping(now, accel, stop_time, turn_now), -math.inf
 
 
@@ -96,15 +100,17 @@ def _travel(speed: float, age: float, accel: float, up: float, lag: float,
     speed-up at most ``accel``)."""
     if math.isinf(accel):
         return top_speed * age
-    return _paired(_STILL, age, speed, 0.0, 0.0, accel, 0.0, top_speed, up, lag)[0]
+    return _paired(_STILL, age, speed, 0.0, 0.0, accel, 0.0, top_speed, up, lag, up)[0]
 
 
 def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
             a: float, accel: float, half_base: float, top_speed: float, up: float,
-            lag: float, sight: tuple[float, float, float, float, float, float] = _BLIND
+            lag: float, turn_up: float,
+            sight: tuple[float, float, float, float, float, float] = _BLIND
             ) -> tuple[float, float]:
     """(around, reach) [m] of a neighbour heard from on wheels of finite ``accel``
-    (arguments as :func:`neighbour_radii`, ``up`` its speed-up at most ``accel``): over the
+    (arguments as :func:`neighbour_radii`, ``up`` its speed-up at most ``accel``,
+    ``turn_up`` its wheels' half difference's at most ``up``): over the
     splits of the ``age`` (>= 0) paired with this robot's ``trail``, the largest of a +
     how far it can have travelled all round + this robot's share of its own motion, and
     of a + rho (:func:`swerve`; inf when ``half_base`` <= 0) + that share
@@ -133,7 +139,7 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
             t2 = t * t
             # the heading's departure from the reported one, integrated over t [rad s]
             swing = (half_turn * t2 + accel_lag2 * t / half_base
-                     + up * t2 * t / (6.0 * half_base))
+                     + turn_up * t2 * t / (6.0 * half_base))
             rho = min(half_accel * t2 + accel_lag * t + speed * swing,
                       half_up * t2 + accel_lag2 + (speed + accel_lag + up * t) * swing)
         reach = max(reach, a + rho + _own_share(trail, k, sx, sy, ex, ey, off, rho))
@@ -198,7 +204,7 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
                     turn_rate: float, age: float, trail: FloatRows, a: float,
                     accel: float,
                     half_base: float, top_speed: float, staleness: float, stop_time: float,
-                    wheel_top: float, speed_up: float, lag: float
+                    wheel_top: float, speed_up: float, lag: float, turn_up: float
                     ) -> tuple[float, float, float, float]:
     """(full, half, east, north) for a neighbour reported at (x, y) = this robot's position
     less (``rel_x``, ``rel_y``) [m], along ``heading`` [rad] at ``speed`` [m/s] and
@@ -225,10 +231,10 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     reported position."""
     if age > staleness or math.isinf(accel):
         nearer = approach(rel_x, rel_y, heading, speed, turn_rate, age, accel, half_base,
-                          speed_up, lag)
+                          speed_up, lag, turn_up)
         full, half = neighbour_hazard(speed, half_base * abs(turn_rate), age,
                                       trail[0][0], a, accel, top_speed, staleness,
-                                      stop_time, wheel_top, nearer, speed_up, lag)
+                                      stop_time, wheel_top, nearer, speed_up, lag, turn_up)
         return full, half, 0.0, 0.0
     east, north, off, seg_x, seg_y = _nearest_on_report(rel_x, rel_y, heading, speed, age)
     dist = math.sqrt(rel_x * rel_x + rel_y * rel_y)
@@ -237,8 +243,9 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     far = math.sqrt(far_x * far_x + far_y * far_y)
     sight = (dist, -rel_x / max(dist, EPS), -rel_y / max(dist, EPS), off,
              far_x / max(far, EPS), far_y / max(far, EPS))
+    up = min(speed_up, accel)
     around, reach = _paired(trail, age, speed, turn_rate, a, accel, half_base, top_speed,
-                            min(speed_up, accel), lag, sight)
+                            up, lag, min(turn_up, up), sight)
     room = max(off - reach, dist - around)
     return -math.inf, off - room, east, north
 
@@ -258,12 +265,13 @@ def _nearest_on_report(rel_x: float, rel_y: float, heading: float, speed: float,
 
 def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
              age: float, accel: float, half_base: float, speed_up: float = math.inf,
-             lag: float = 0.0) -> float:
+             lag: float = 0.0, turn_up: float = math.inf) -> float:
     """How much nearer [m] a neighbour can be by now to a point (``rel_x``, ``rel_y``) [m]
     from its reported position than that position is, having reported commanding ``speed``
     [m/s] (signed, along ``heading`` [rad]) and ``turn_rate`` [rad/s] ``age`` [s] ago, each
     wheel's ground speed changing by at most ``accel`` [m/s^2], its law speeding it up (its
-    speed and each wheel's share of its turn) by at most ``speed_up`` [m/s^2], its wheels
+    speed and each wheel's share of its turn) by at most ``speed_up`` [m/s^2] (each
+    wheel's share of its turn by at most ``turn_up`` [m/s^2] where that is less), its wheels
     following its commands ``lag`` [s] late (a period and the drive latency) and 2
     ``half_base`` [m] apart (accel inf: no bound, on wheels that change speed at once).
 
@@ -282,23 +290,26 @@ def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate
         return math.inf
     age = max(age, 0.0)
     off = _nearest_on_report(rel_x, rel_y, heading, speed, age)[2]
-    rho = swerve(speed, turn_rate, age, accel, half_base, speed_up, lag)
+    rho = swerve(speed, turn_rate, age, accel, half_base, speed_up, lag, turn_up)
     return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho
 
 
 def swerve(speed: float, turn_rate: float, age: float, accel: float, half_base: float,
-           speed_up: float = math.inf, lag: float = 0.0) -> float:
+           speed_up: float = math.inf, lag: float = 0.0, turn_up: float = math.inf
+           ) -> float:
     """rho [m] of :func:`approach` (same arguments): how far from the segment of its
     report's extrapolation a neighbour can be ``age`` [s] after its stamp (inf: no bound)."""
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
-    return _paired(_STILL, age, speed, turn_rate, 0.0, accel, half_base, math.inf,
-                   min(speed_up, accel), lag)[1]
+    up = min(speed_up, accel)
+    return _paired(_STILL, age, speed, turn_rate, 0.0, accel, half_base, math.inf, up, lag,
+                   min(turn_up, up))[1]
 
 
 def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: float,
                   staleness: float, stop_time: float, wheel_top: float = math.inf,
-                  speed_up: float = math.inf, lag: float = 0.0) -> float:
+                  speed_up: float = math.inf, lag: float = 0.0, turn_up: float = math.inf
+                  ) -> float:
     """The radius [m] of the obstacle the law goes round for a silent neighbour (arguments
     as :func:`neighbour_hazard`): its silent disc less a, since the law keeps b > a from an
     obstacle's surface, at least a/2. On a robot that brakes at once (infinite ``accel``)
@@ -307,7 +318,7 @@ def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: 
     if math.isinf(accel):
         return 0.5 * a
     full, _ = neighbour_hazard(speed, turn, math.inf, 0.0, a, accel, top_speed, staleness,
-                               stop_time, wheel_top, math.inf, speed_up, lag)
+                               stop_time, wheel_top, math.inf, speed_up, lag, turn_up)
     return max(0.5 * a, full - a)
 
 
@@ -349,7 +360,7 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
                  haz_moving: FloatSeq, accel: float, period: float, latency: float,
                  turn_rate: float, wheel_base: float,
                  top_speed: float = math.inf, margin: float = 0.0,
-                 speed_up: float = math.inf) -> tuple[float, float, float]:
+                 turn_up: float = math.inf) -> tuple[float, float, float]:
     """(forward, backward) speed limits [m/s] (inf: none) of a robot at (x, y, theta)
     [m, m, rad] moving at (v_now [m/s], u_now [rad/s]) among hazards (centre; exclusion
     radii [m]: of the whole free distance, and of the half this robot owns (-inf: no such
@@ -364,8 +375,9 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     While it stops, the robot's heading sweeps on at u_now (braking takes the whole ramp of
     both wheels, so the turn rate holds) and may turn further during the reaction time: at
     up to ``turn_rate`` [rad/s] more, or, with finite ``accel``, as far as its law lets its
-    wheels bend the path in that time (u changing at 2 ``speed_up`` / wheel_base, speed_up
-    [m/s^2] at most accel: speed_up tau^2 / wheel_base), whichever is less. A hazard counts
+    wheels bend the path in that time (u changing at 2 ``turn_up`` / wheel_base, turn_up
+    [m/s^2] the most its law speeds up the wheels' half difference, at most accel:
+    turn_up tau^2 / wheel_base), whichever is less. A hazard counts
     with the cosine of its bearing's angle to the nearest heading of that sweep (1 inside
     it; none beyond 90 degrees); a moving one as if its bearing were MOVING_PAD nearer, as
     its own motion turns the line of sight. Hazards farther than the robot needs to stop
@@ -385,7 +397,7 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     sweep = u_now * stop_time
     bend = turn_rate * reaction
     if not math.isinf(accel) and wheel_base > 0.0:
-        bend = min(bend, min(speed_up, accel) * reaction * reaction / wheel_base)
+        bend = min(bend, min(turn_up, accel) * reaction * reaction / wheel_base)
     spread = 0.5 * abs(sweep) + bend
     middle = theta + 0.5 * sweep
     reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period, turn)

@@ -79,7 +79,8 @@ class LawParams(NamedTuple):
     u_max: float        # rad/s
     hysteresis: float   # m
     accel: float        # m/s^2, braking deceleration (inf: an ideal robot)
-    speed_up: float     # m/s^2, the most the law speeds up |v| and the wheels' half difference
+    speed_up: float     # m/s^2, the most the law speeds up |v|
+    turn_up: float      # m/s^2, the most the law speeds up the wheels' half difference
     latency: float      # s, from a command to the drivers applying it
     wheel_radius: float  # m
     wheel_base: float   # m
@@ -97,10 +98,11 @@ class LawParams(NamedTuple):
         wheels follow any command at once). ``law = "paper"`` turns the deadlock resolution
         off (sidestep and per-pair hysteresis)."""
         inf = math.inf
-        limits = ((robot.a_max, robot.a_up, robot.drive_latency, robot.wheel_radius,
-                   robot.wheel_base, robot.wheel_speed_limit, robot.wheel_ramp,
-                   robot.watchdog_timeout, robot.wheel_slip)
-                  if robot is not None else (inf, inf, 0.0, 1.0, 1.0, inf, inf, 0.0, 0.0))
+        limits = ((robot.a_max, robot.a_up, robot.a_turn_up, robot.drive_latency,
+                   robot.wheel_radius, robot.wheel_base, robot.wheel_speed_limit,
+                   robot.wheel_ramp, robot.watchdog_timeout, robot.wheel_slip)
+                  if robot is not None else (inf, inf, inf, 0.0, 1.0, 1.0, inf, inf, 0.0,
+                                             0.0))
         resolve = control.law != "paper"
         return cls(control.K, control.K_theta, control.D_max, control.K_ij, control.b,
                    control.c, control.u_max, control.hysteresis, *limits, control.governor,
@@ -328,7 +330,7 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         fwd, bwd, room = speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r,
                                       haz_half, haz_moving, p.accel, hold, p.latency,
                                       p.u_max, p.wheel_base, top,
-                                      slip_margin(p.slip, p.wheel_base), p.speed_up)
+                                      slip_margin(p.slip, p.wheel_base), p.turn_up)
         u_cap = turn_limit(room, p.slip, p.accel, hold + p.latency, p.wheel_base)
         u = min(max(u, -u_cap), u_cap)
     allowed = fwd if v >= 0.0 else bwd
@@ -353,12 +355,12 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
             common = min(max(want_common, -change), change)
             left = change - abs(common)
             turn = min(max(want_turn, -left), left)
-        if p.speed_up < p.accel:
+        if p.turn_up < p.accel:
             # speeding up (|v| or the wheels' half difference) slower than the ramp, as the
             # neighbours count on (A17); slowing down keeps the full ramp
             up = p.speed_up * dt / (TWO_PI * p.wheel_radius)     # rev/s per period
             common = grown_by(0.5 * (wr + wl), common, up)
-            turn = grown_by(0.5 * (wr - wl), turn, up)
+            turn = grown_by(0.5 * (wr - wl), turn, p.turn_up * dt / (TWO_PI * p.wheel_radius))
         wr, wl = wr + common + turn, wl + common - turn
         # within the speed limit (a set-point already at it may not step beyond)
         wr = min(max(wr, -p.speed_limit), p.speed_limit)

@@ -224,7 +224,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                                                       age, trail, a, p.accel,
                                                       0.5 * p.wheel_base, top_speed,
                                                       staleness, stop_time, wheel_top,
-                                                      p.speed_up, lag)
+                                                      p.speed_up, lag, p.turn_up)
             h_r[n_h], h_h[n_h] = full + grow, half + grow
             h_x[n_h], h_y[n_h] = view[j, 0] + east, view[j, 1] + north
             h_m[n_h] = age <= staleness
@@ -246,7 +246,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                         o_x[k], o_y[k], o_k[k] = nbr_x[q], nbr_y[q], -1
                         o_r[k] = silent_radius(view[j, 3], 0.5 * view[j, 4] * p.wheel_base,
                                                a, p.accel, top_speed, staleness,
-                                               stop_time, wheel_top, p.speed_up, lag)
+                                               stop_time, wheel_top, p.speed_up, lag,
+                                               p.turn_up)
                     k += 1
                 elif status == FRESH:
                     nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]

@@ -59,9 +59,10 @@ def test_report_on_a_folder_that_is_not_a_run(tmp_path, capsys):
 
 
 def test_sim_warns_when_data_this_old_make_the_places_walls(tmp_path, capsys):
-    """Fast robots, 5 m apart in a circle moving at 3 m/s: on a 0.5 s link the governor's
-    discs close the gaps between places (docs/controller.md A10), and sim says so before
-    it runs; on a prompt link it does not."""
+    """Fast robots whose law speeds up at their wheels' full ramp, 5 m apart in a circle
+    moving at 3 m/s: on a 0.5 s link the governor's discs close the gaps between places
+    (docs/controller.md A10, A17), and sim says so before it runs; on a prompt link it
+    does not."""
     robots = "".join(f"[[robots]]\nid = {i + 1}\npose = [{-20.0 - 3 * i}, 0.0, 0.0]\n"
                      for i in range(4))
     for delay, warned in ((0.5, True), (0.0, False)):
@@ -69,7 +70,8 @@ def test_sim_warns_when_data_this_old_make_the_places_walls(tmp_path, capsys):
         sc.write_text(f'name = "walls"\nduration = 1.0\n[formation]\nkind = "circle"\n'
                       f'spacing = 5.0\nvelocity = [3.0, 0.0]\n[world]\n'
                       f'link_delay = {delay}\n{robots}')
-        assert main(["sim", str(sc), "--robot", str(ROOT / "robots" / "fast.toml"),
+        assert main(["sim", str(sc), "--robot",
+                     str(ROOT / "campaigns" / "profiles" / "fast-ramp.toml"),
                      "--out", str(tmp_path / f"o{delay}"), "--record-every", "0"]) == 0
         out = " ".join(capsys.readouterr().out.split())
         assert ("places are as close as 5.00 m" in out) == warned, out

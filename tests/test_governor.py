@@ -4,7 +4,7 @@ import math
 from pathlib import Path
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from agent.governor import (
@@ -170,7 +170,7 @@ def test_pairing_the_neighbour_s_travel_with_this_robot_s_path_keeps_stops_apart
              [now[0] - p[i][0] for i in ends[1:]], [now[1] - p[i][1] for i in ends[1:]])
     full, half, east, north = neighbour_radii(now[0], now[1], 0.0, v, u, age, trail, A,
                                               ACCEL, half_base, TOP, STALE, STOP, 8.0,
-                                              math.inf, 0.0)
+                                              math.inf, 0.0, math.inf)
     own = 0.5 * (math.dist(now, (east, north)) - half)
     assert full == -math.inf
     for k in range(steps + 1):
@@ -193,7 +193,7 @@ def test_a_neighbour_driving_on_beside_this_robot_is_met_where_it_is_now():
     trail = _straight(speed, heading, age)
     full, half, east, north = neighbour_radii(-reported[0], -reported[1], heading_n, v_n,
                                               0.0, age, trail, 1.0, 6.0, 0.25, 6.0, 0.8,
-                                              0.13, 6.0, 6.0, 0.03)
+                                              0.13, 6.0, 6.0, 0.03, 6.0)
     centre = (reported[0] + east, reported[1] + north)
     assert centre == pytest.approx(now_n, abs=1e-9)
 
@@ -211,7 +211,7 @@ def test_a_neighbour_met_head_on_with_old_data_is_paired_with_this_robot_s_path(
     at one instant the neighbour last acted; with one split, in full."""
     age, speed = 0.5, 1.5
     trail = _straight(speed, 0.0, age)
-    args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0)
+    args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0, math.inf)
 
     def room(trail):         # m, from this robot to the edge of the neighbour's disc
         _, half, east, north = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trail,
@@ -240,7 +240,7 @@ def test_a_robot_driving_beside_a_neighbour_counts_little_of_its_own_motion():
     line the neighbour drives, not toward it, and its disc of the neighbour is smaller than
     one that counts its path in full; driving straight at it, the same."""
     age, speed = 0.5, 1.5
-    args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0)
+    args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0, math.inf)
 
     def half(heading):       # the neighbour 5 m north, both driving east
         trail = _straight(speed, heading, age)
@@ -297,24 +297,29 @@ def _committed(now: float, choice: float, up: float, brake: float) -> float:
 
 
 @settings(max_examples=300, deadline=None)
+@example(v=3.0, u=0.0, accel=25.0, up=2.0, turn=1.0, base=0.3, age=0.6, lag=(0.02, 0.01),
+         before=(0.0, 0.0), point=(1.5, 2.0), plan=[(0.0, 1.0)] * 6)      # turning ever faster
+@example(v=3.0, u=0.0, accel=25.0, up=2.0, turn=0.2, base=0.3, age=0.6, lag=(0.02, 0.01),
+         before=(0.0, 0.0), point=(2.0, 1.0), plan=[(0.0, 1.0)] * 6)
 @given(v=st.floats(-3.0, 3.0), u=st.floats(-4.0, 4.0), accel=st.floats(2.0, 25.0),
-       up=st.floats(0.5, 2.0), base=st.floats(0.3, 0.8), age=st.floats(0.01, 0.6),
-       lag=st.tuples(st.floats(0.01, 0.02), st.floats(0.0, 0.03)),
+       up=st.floats(0.5, 2.0), turn=st.floats(0.05, 1.0), base=st.floats(0.3, 0.8),
+       age=st.floats(0.01, 0.6), lag=st.tuples(st.floats(0.01, 0.02), st.floats(0.0, 0.03)),
        before=st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0)),
        point=st.tuples(st.floats(-2.0, 6.0), st.floats(-2.0, 2.0)),
        plan=st.lists(st.tuples(st.sampled_from([-1.0, 0.0, 1.0]),
                                st.sampled_from([-1.0, 0.0, 1.0])), min_size=6, max_size=6))
 def test_a_neighbour_that_speeds_up_slowly_is_never_nearer_than_its_report_allows(
-        v, u, accel, up, base, age, lag, before, point, plan):
-    """A17: a neighbour whose law speeds it up (its speed and each wheel's share of its
-    turn) at ``up`` and brakes at up to ``accel``, reported at the origin commanding v
+        v, u, accel, up, turn, base, age, lag, before, point, plan):
+    """A17: a neighbour whose law speeds it up (its speed at ``up``, each wheel's share of
+    its turn at ``turn`` x up) and brakes at up to ``accel``, reported at the origin commanding v
     along x and u; its wheels follow its commands a drive latency late at their ramp, and
     at the stamp still run the command of a period before (within a period's ramp of the
     reported one). At every instant its distance to ``point`` is at least the distance
     from the origin less :func:`approach` with that speed-up and lag."""
     period, latency = lag
     half = 0.5 * base
-    nearer = approach(point[0], point[1], 0.0, v, u, age, accel, half, up, period + latency)
+    nearer = approach(point[0], point[1], 0.0, v, u, age, accel, half, up, period + latency,
+                      turn * up)
     d0 = math.hypot(*point)
     sv, sw = v, u * half                               # set-point: speed, half difference
     wv = v + before[0] * accel * period                # the wheels: the command before
@@ -326,7 +331,7 @@ def test_a_neighbour_that_speeds_up_slowly_is_never_nearer_than_its_report_allow
     for k in range(steps):
         cv, cw = plan[k * len(plan) // steps]
         sv = _committed(sv, cv, up * dt, accel * dt)
-        sw = _committed(sw, cw, up * dt, accel * dt)
+        sw = _committed(sw, cw, turn * up * dt, accel * dt)
         history.append((sv, sw))
         if (k + 1) * dt >= latency:                    # the command latency ago
             tv, tw = history[max(len(history) - 1 - round(latency / dt), 0)]
@@ -519,9 +524,9 @@ def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path
     trail = (paths, paths[1:] + [0.0], paths, [0.0] * SPLITS, paths[1:] + [0.0],
              [0.0] * SPLITS)                                   # straight along x
     sight = (5.0, 1.0, 0.0, 4.5, 0.8, 0.6)
-    got = _paired(trail, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04, sight)
+    got = _paired(trail, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04, up, sight)
     alone = [_paired([[row[k]] for row in trail], age * (k + 1) / SPLITS, speed, turn_rate,
-                     A, ACCEL, 0.4, TOP, up, 0.04, sight) for k in range(SPLITS)]
+                     A, ACCEL, 0.4, TOP, up, 0.04, up, sight) for k in range(SPLITS)]
     assert got == (max(r[0] for r in alone), max(r[1] for r in alone))
 
 
