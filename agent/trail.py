@@ -8,7 +8,9 @@ between them when it last acted, and counts this robot's own motion since that i
 from __future__ import annotations
 
 import math
-from bisect import bisect_left, bisect_right
+from bisect import bisect_right
+
+Splits = tuple[list[float], list[float], list[float], list[float], list[float], list[float]]
 
 
 class Trail:
@@ -21,6 +23,10 @@ class Trail:
         self._path: list[float] = []        # m, cumulative, from the first position
         self._x: list[float] = []
         self._y: list[float] = []
+        # the last splits asked for, until the next record: neighbours whose states carry
+        # the same stamp (robots ticking on a common grid) share them
+        self._asked: tuple[float, float, int] | None = None
+        self._answer: Splits = ([], [], [], [], [], [])
 
     def record(self, t: float, x: float, y: float) -> None:
         """The position (x, y) [m] at time t [s] (non-decreasing)."""
@@ -29,32 +35,37 @@ class Trail:
         self._path.append((self._path[-1] if self._path else 0.0) + step)
         self._x.append(x)
         self._y.append(y)
+        self._asked = None
         if self._t[0] < t - 2.0 * self.span:      # drop the old half now and then
             cut = bisect_right(self._t, t - self.span) - 1
             del self._t[:cut], self._path[:cut], self._x[:cut], self._y[:cut]
 
-    def splits(self, start: float, span: float, pieces: int
-               ) -> tuple[list[float], list[float], list[float], list[float], list[float],
-                          list[float]]:
+    def splits(self, start: float, span: float, pieces: int) -> Splits:
         """This robot's motion over each piece k = 0 .. ``pieces`` - 1 of the time from
         ``start`` [s], ``span`` [s] long, split evenly, as
         :func:`agent.governor.neighbour_radii` takes it: the path [m] to the newest
         position from the last position recorded at or before the piece's start, and from
         the first at or after its end (the newest, if none); the displacement east and
-        north [m] to the newest position from each of those two. All zero before any."""
+        north [m] to the newest position from each of those two. All zero before any.
+        The lists are shared with the next caller asking the same: read, do not change."""
+        asked = (start, span, pieces)
+        if asked == self._asked:
+            return self._answer
         t, path, xs, ys = self._t, self._path, self._x, self._y
         if not path:
             return ([0.0] * pieces, [0.0] * pieces, [0.0] * pieces, [0.0] * pieces,
                     [0.0] * pieces, [0.0] * pieces)
         last, newest, x, y = path[-1], len(path) - 1, xs[-1], ys[-1]
-        paths, inner, start_x, start_y, end_x, end_y = [], [], [], [], [], []
-        for k in range(pieces):
-            i = max(bisect_right(t, start + span * k / pieces) - 1, 0)
-            j = min(bisect_left(t, start + span * (k + 1) / pieces), newest)
-            paths.append(last - path[i])
-            inner.append(last - path[j])
-            start_x.append(x - xs[i])
-            start_y.append(y - ys[i])
-            end_x.append(x - xs[j])
-            end_y.append(y - ys[j])
-        return paths, inner, start_x, start_y, end_x, end_y
+        # each boundary's last position at or before it, and first at or after it
+        before, after = [], []
+        for m in range(pieces + 1):
+            edge = start + span * m / pieces
+            i = bisect_right(t, edge)
+            before.append(max(i - 1, 0))
+            after.append(min(i - 1 if i > 0 and t[i - 1] == edge else i, newest))
+        first, end = before[:-1], after[1:]
+        answer: Splits = ([last - path[i] for i in first], [last - path[j] for j in end],
+                          [x - xs[i] for i in first], [y - ys[i] for i in first],
+                          [x - xs[j] for j in end], [y - ys[j] for j in end])
+        self._asked, self._answer = asked, answer
+        return answer

@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/batch_scaling.py [--sizes 9 100 1000 10000] [--repeats 3]
     .venv/bin/python bench/batch_scaling.py --governor-cost [--same-states] [--robot FILE]
+                                            [--link-delay S]
 
 Each size runs a grid formation (spacing 5 m) moving at 2 m/s through a field of obstacles,
 robots starting scattered around their places, T = 0.02 s, 4 physics substeps, metrics on,
@@ -14,7 +15,9 @@ governor on and off (``[control] governor``), alternating in one process, and th
 the medians (issue 16 asks at most 1.5x). The two runs drive different paths; with
 ``--same-states`` the control step alone is timed instead, with and without the governor
 on the very same states (each period of a run with it, the step without it first, its
-results thrown away). ``--robot`` runs a robot profile instead of the ideal robot.
+results thrown away). ``--robot`` runs a robot profile instead of the ideal robot;
+``--link-delay`` delays every state exchanged by that many seconds (the robots otherwise
+see each other's current states, and the governor counts no data age).
 """
 from __future__ import annotations
 
@@ -33,7 +36,7 @@ from agent.config import ControlParams, RobotParams
 from agent.formation import Formation, FormationKind, formation_offsets
 from firmware_sim import compiled, swarm_step
 from firmware_sim.batch import SimOptions, simulate
-from firmware_sim.world import Obstacles
+from firmware_sim.world import Obstacles, WorldParams
 from hil.robot_profile import load_robot_profile
 from hil.scenario import load_scenario
 
@@ -53,14 +56,16 @@ def swarm(n: int, seed: int = 0):
     return poses, form, obstacles
 
 
-def run_once(n: int, steps: int, control: ControlParams, robot: RobotParams
-             ) -> tuple[float, float]:
-    """(wall seconds per period, share of time in the law) of one run."""
+def run_once(n: int, steps: int, control: ControlParams, robot: RobotParams,
+             delay: float = 0.0) -> tuple[float, float]:
+    """(wall seconds per period, share of time in the law) of one run, the robots' states
+    ``delay`` [s] late (0: each sees the others' current ones)."""
     poses, form, obstacles = swarm(n)
+    world = WorldParams(link_delay=delay) if delay > 0.0 else None
     t0 = time.perf_counter()
     res = simulate(np.arange(n), poses, form, obstacles, control, robot,
                    SimOptions(duration=steps * control.period, record_every=0),
-                   clock=time.perf_counter)
+                   clock=time.perf_counter, world=world)
     wall = time.perf_counter() - t0
     return wall / (steps + 1), res.law_seconds / wall
 
@@ -72,7 +77,7 @@ def time_run(n: int, steps: int, repeats: int, robot: RobotParams) -> tuple[floa
 
 
 def governor_cost(sizes: list[int], repeats: int, robot: RobotParams,
-                  same_states: bool = False) -> None:
+                  same_states: bool = False, delay: float = 0.0) -> None:
     """Print, per size, the cost per robot-step with the governor on and off and the ratio
     of the medians: of whole runs, alternating, or (``same_states``) of the control step
     alone on the states of runs with it (:func:`control_timed`)."""
@@ -85,12 +90,13 @@ def governor_cost(sizes: list[int], repeats: int, robot: RobotParams,
             if same_states:
                 spent = {"on": 0.0, "off": 0.0}
                 with control_timed(spent):
-                    run_once(n, steps, ControlParams(governor=True), robot)
+                    run_once(n, steps, ControlParams(governor=True), robot, delay)
                 on.append(spent["on"] / (steps + 1) / n)
                 off.append(spent["off"] / (steps + 1) / n)
             else:
-                on.append(run_once(n, steps, ControlParams(governor=True), robot)[0] / n)
-                off.append(run_once(n, steps, ControlParams(governor=False), robot)[0] / n)
+                on.append(run_once(n, steps, ControlParams(governor=True), robot, delay)[0] / n)
+                off.append(run_once(n, steps, ControlParams(governor=False), robot, delay)[0]
+                           / n)
         m_on, m_off = statistics.median(on), statistics.median(off)
         print(f"{n:>7} {m_on * 1e6:>17.2f} {m_off * 1e6:>18.2f} {m_on / m_off:>6.2f}",
               flush=True)
@@ -141,13 +147,15 @@ def main() -> None:
                              "without the governor on the same states")
     parser.add_argument("--robot", metavar="FILE",
                         help="robot profile (robots/*.toml; default: the ideal robot)")
+    parser.add_argument("--link-delay", type=float, default=0.0, metavar="S",
+                        help="with --governor-cost: the robots' states this late [s]")
     args = parser.parse_args()
     if args.same_states and not args.governor_cost:
         parser.error("--same-states times the governor's cost: give --governor-cost too")
     robot = load_robot_profile(args.robot) if args.robot else RobotParams()
     if args.governor_cost:
         run_once(9, 10, ControlParams(), robot)        # compile before timing
-        governor_cost(args.sizes, args.repeats, robot, args.same_states)
+        governor_cost(args.sizes, args.repeats, robot, args.same_states, args.link_delay)
         return
 
     sc = load_scenario(ROOT / "scenarios" / "paper.toml")

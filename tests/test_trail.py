@@ -52,3 +52,14 @@ def test_the_splits_of_an_age_give_the_motion_since_each_piece_s_start_and_end()
     # and at each end: (3, 4), (6, 8), (6, 0)
     assert end_east == pytest.approx([3.0, 0.0, 0.0])
     assert end_north == pytest.approx([-4.0, -8.0, 0.0])
+
+
+def test_the_splits_asked_again_are_the_same_until_the_next_record():
+    trail = Trail(span=1.0)
+    trail.record(0.0, 0.0, 0.0)
+    trail.record(0.1, 1.0, 0.0)
+    first = trail.splits(0.0, 0.1, 2)
+    assert trail.splits(0.0, 0.1, 2) is first            # neighbours of one stamp share it
+    assert first[:2] == ([1.0, 1.0], [0.0, 0.0])
+    trail.record(0.2, 3.0, 0.0)
+    assert trail.splits(0.0, 0.1, 2)[:2] == ([3.0, 3.0], [2.0, 2.0])
