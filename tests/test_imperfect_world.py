@@ -47,12 +47,12 @@ def test_a_scenario_without_world_is_the_ideal_world():
 
 
 def test_link_delay_makes_the_governor_work_harder():
-    """The grid scenario with the fast profile (6 m/s, 6 m/s^2): with neighbour states
-    0.3 s old the safety governor must lower the speed in a quarter again as many periods as
-    with fresh ones, and the robots pass each other wider (the discs it keeps clear of grow
-    with the data's age)."""
+    """The grid scenario with the fast robot speeding up at its wheels' ramp (6 m/s,
+    6 m/s^2, no speed_up or turn_up): with neighbour states 0.3 s old the safety governor
+    must lower the speed in a quarter again as many periods as with fresh ones, and the
+    robots pass each other wider (the discs it keeps clear of grow with the data's age)."""
     sc = load_scenario(ROOT / "scenarios" / "grid.toml")
-    fast = load_robot_profile(ROOT / "robots" / "fast.toml")
+    fast = load_robot_profile(ROOT / "campaigns" / "profiles" / "fast-ramp.toml")
 
     def metrics(delay):
         r = simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, fast,
