@@ -171,8 +171,9 @@ def _own_share(trail: FloatRows, k: int, sx: float, sy: float, ex: float,
         return path
     start_x, start_y, end_x, end_y = trail[2][k], trail[3][k], trail[4][k], trail[5][k]
     sin_b = min(radius / dist, 1.0)        # the set's points lie within asin(sin_b)
-    toward = max(_toward(start_x, start_y, sx, sy, ex, ey, sin_b),
-                 _toward(end_x, end_y, sx, sy, ex, ey, sin_b))
+    widen = (math.sqrt(1.0 - sin_b * sin_b), sin_b, False)
+    toward = max(_toward(start_x, start_y, sx, sy, ex, ey, widen),
+                 _toward(end_x, end_y, sx, sy, ex, ey, widen))
     within = path - trail[1][k]            # m, walked within the split
     chord_x, chord_y = start_x - end_x, start_y - end_y
     bulge = 0.5 * math.sqrt(max(within * within - chord_x * chord_x - chord_y * chord_y,
@@ -181,10 +182,10 @@ def _own_share(trail: FloatRows, k: int, sx: float, sy: float, ex: float,
 
 
 def _toward(dx: float, dy: float, sx: float, sy: float, ex: float, ey: float,
-            sin_b: float) -> float:
-    """The largest component [m] of (``dx``, ``dy``) [m] along a direction within
-    asin(``sin_b``) of the shorter arc from unit (``sx``, ``sy``) to unit (``ex``,
-    ``ey``)."""
+            widen: tuple[float, float, bool]) -> float:
+    """The largest component [m] of (``dx``, ``dy``) [m] along a direction within an
+    angle ``widen`` (its cosine, sine, and False, as :func:`_cosine`'s pad) of the shorter
+    arc from unit (``sx``, ``sy``) to unit (``ex``, ``ey``)."""
     size = math.sqrt(dx * dx + dy * dy)
     if size <= 0.0:
         return 0.0
@@ -192,12 +193,9 @@ def _toward(dx: float, dy: float, sx: float, sy: float, ex: float, ey: float,
     if (arc != 0.0 and arc * (sx * dy - sy * dx) >= 0.0 and arc * (dx * ey - dy * ex) >= 0.0
             and dx * (sx + ex) + dy * (sy + ey) > 0.0):
         return size                        # it points into the arc
+    # g, the angle to the arc's nearer end: the cosine of what is beyond the widening
     cos_g = min(max(max(dx * sx + dy * sy, dx * ex + dy * ey) / size, -1.0), 1.0)
-    cos_b = math.sqrt(1.0 - sin_b * sin_b)
-    if cos_g >= cos_b:
-        return size
-    # beyond the widened arc by the angle g - b, g the angle to the arc's nearer end
-    return size * (cos_g * cos_b + math.sqrt(1.0 - cos_g * cos_g) * sin_b)
+    return size * _cosine(cos_g, math.sqrt(1.0 - cos_g * cos_g), widen)
 
 
 def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
