@@ -128,10 +128,12 @@ def _drive(v: float, u: float, accel: float, half: float, age: float, plan: list
     dt = age / steps
     for k in range(steps):
         ar, al = plan[k * len(plan) // steps]
+        # the step's mean wheel speeds (an Euler step at its end speed drives too far)
+        mid_r, mid_l = right + 0.5 * ar * accel * dt, left + 0.5 * al * accel * dt
         right += ar * accel * dt
         left += al * accel * dt
-        x, y, theta = arc_step(x, y, theta, 0.5 * (right + left) * dt,
-                               (right - left) / (2.0 * half) * dt)
+        x, y, theta = arc_step(x, y, theta, 0.5 * (mid_r + mid_l) * dt,
+                               (mid_r - mid_l) / (2.0 * half) * dt)
         out.append((x, y))
     return out
 
@@ -274,9 +276,11 @@ def test_a_neighbour_is_never_nearer_than_its_heading_allows(v, u, accel, base, 
     dt = age / steps
     for k in range(steps):
         ar, al = wheel_acc[k * len(wheel_acc) // steps]
+        # the step's mean wheel speeds (an Euler step at its end speed drove too far)
+        mid_r, mid_l = right + 0.5 * ar * accel * dt, left + 0.5 * al * accel * dt
         right += ar * accel * dt
         left += al * accel * dt
-        speed, turn = 0.5 * (right + left), (right - left) / base
+        speed, turn = 0.5 * (mid_r + mid_l), (mid_r - mid_l) / base
         x, y, theta = arc_step(x, y, theta, speed * dt, turn * dt)
         assert math.hypot(point[0] - x, point[1] - y) >= d0 - nearer - 1e-6
 
