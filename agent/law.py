@@ -154,7 +154,7 @@ def moved_estimate(mem: LawMemory, dx: float, dy: float) -> LawMemory:
 
 def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_vx: float,
              ref_vy: float, nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_held: FloatSeq,
-             obs_x: FloatSeq, obs_y: FloatSeq,
+             nbr_grow: FloatSeq, obs_x: FloatSeq, obs_y: FloatSeq,
              obs_r: FloatSeq, haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq,
              haz_half: FloatSeq, haz_moving: FloatSeq, mem: LawMemory, p: LawParams,
              dt: float) -> tuple[float, float, int, float, LawMemory]:
@@ -164,8 +164,9 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     (x, y, theta) is the robot's pose, (ref_x, ref_y) its reference p_d(t) and (ref_vx,
     ref_vy) [m/s] the reference's velocity p_d_dot(t); ``nbr_x``,
     ``nbr_y`` the neighbours in range (extrapolated to now) and ``nbr_held`` 1.0 for each
-    whose pair was active in the last period (:func:`pair_active`), else 0.0; ``obs_x``,
-    ``obs_y``, ``obs_r``
+    whose pair was active in the last period (:func:`pair_active`), else 0.0, and
+    ``nbr_grow`` [m] how much wider than a the governor's disc of each is (its half
+    radius less a; 0 without the governor); ``obs_x``, ``obs_y``, ``obs_r``
     the obstacles in range (centre and radius); ``haz_*`` the governor's hazards (centre,
     exclusion radii [m] of the whole and of the half free distance, moving or not:
     :mod:`agent.governor`); ``dt`` [s]
@@ -282,22 +283,22 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         mode = AVOID
         ff = 0.0
 
-    # TRACK: pass the nearest neighbour in the way b + hysteresis off, on its right; on its
-    # left, the shorter way, when the right leads toward another neighbour within b +
-    # hysteresis and the left into no neighbour's cone, and then on the left until no
-    # neighbour is in the way (A13)
+    # TRACK: pass the nearest neighbour in the way b + hysteresis off its governor's disc,
+    # on its right; on its left, the shorter way, when the right leads toward another
+    # neighbour within that and the left into no neighbour's cone, and then on the left
+    # until no neighbour is in the way (A13)
     passing_side = 0
     if mode == TRACK and p.sidestep:
-        passing, within = p.b + p.hysteresis, min(p.c, D)
-        nearest, phi_in, cone_in, j_in = in_the_way(theta_d, x, y, nbr_x, nbr_y, -1,
-                                                    passing, within)
-        if nearest < within:
+        passing = p.b + p.hysteresis
+        j_in, phi_in, cone_in = in_the_way(theta_d, x, y, nbr_x, nbr_y, nbr_grow, -1,
+                                           passing, p.c, D)
+        if j_in >= 0:
             passing_side = 1 if mem.passing > 0 or (
                 wrap_angle(theta_d - phi_in) > 0.0
-                and in_the_way(phi_in - cone_in, x, y, nbr_x, nbr_y, j_in, passing,
-                               passing)[0] < passing
-                and in_the_way(phi_in + cone_in, x, y, nbr_x, nbr_y, j_in, passing,
-                               within)[0] >= within) else -1
+                and in_the_way(phi_in - cone_in, x, y, nbr_x, nbr_y, nbr_grow, j_in,
+                               passing, passing, math.inf)[0] >= 0
+                and in_the_way(phi_in + cone_in, x, y, nbr_x, nbr_y, nbr_grow, j_in,
+                               passing, p.c, D)[0] < 0) else -1
             theta_d, ff = phi_in + passing_side * cone_in, 0.0
 
     speed = p.K * min(p.D_max, dist)
@@ -371,21 +372,26 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
 
 
 def in_the_way(heading: float, x: float, y: float, nbr_x: FloatSeq, nbr_y: FloatSeq,
-               skip: int, passing: float, within: float) -> tuple[float, float, float, int]:
-    """(d [m], bearing [rad], half-width [rad], index) of the cone of passing (A13) of the
-    nearest neighbour within ``within`` [m] whose cone holds ``heading`` [rad], seen from
-    (x, y) [m]: the bearings within asin(``passing`` / d) of the one to it, or all within
-    90 degrees of it nearer than ``passing``. Neighbour ``skip`` (the one being passed; -1:
-    none) is left out; d = ``within`` and index -1 when none is in the way."""
-    nearest, phi_in, cone_in, j_in = within, 0.0, 0.0, -1
+               nbr_grow: FloatSeq, skip: int, passing: float, within: float,
+               limit: float) -> tuple[int, float, float]:
+    """(index, bearing [rad], half-width [rad]) of the cone of passing (A13) of the
+    neighbour in the way of ``heading`` [rad] from (x, y) [m], or index -1 when none is.
+    A neighbour grown by ``nbr_grow`` (its governor's disc's width beyond a [m]) is in the
+    way when it is nearer than ``within`` + its growth and than ``limit`` [m], and its cone
+    holds the heading: the bearings within asin(P / d) of the one to it, P = ``passing`` +
+    its growth, or all within 90 degrees of it nearer than P. The nearest surface of such
+    discs counts; neighbour ``skip`` (the one being passed; -1: none) is left out."""
+    nearest, phi_in, cone_in, j_in = math.inf, 0.0, 0.0, -1
     for j in range(len(nbr_x)):
         if j == skip:
             continue
         dx, dy = nbr_x[j] - x, nbr_y[j] - y
         d = math.sqrt(dx * dx + dy * dy)
-        if EPS < d < nearest:
+        grow = max(nbr_grow[j], 0.0)
+        if EPS < d < min(within + grow, limit) and d - grow < nearest:
             phi = math.atan2(dy, dx)
-            cone = HALF_PI if d <= passing else math.asin(passing / d)
+            reach = passing + grow
+            cone = HALF_PI if d <= reach else math.asin(reach / d)
             if abs(wrap_angle(heading - phi)) < cone:
-                nearest, phi_in, cone_in, j_in = d, phi, cone, j
-    return nearest, phi_in, cone_in, j_in
+                nearest, phi_in, cone_in, j_in = d - grow, phi, cone, j
+    return j_in, phi_in, cone_in

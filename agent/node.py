@@ -370,15 +370,20 @@ class Agent:
         rx, ry, rvx, rvy = formation.point(0, now_w - mission.epoch)
         self.reference = (rx, ry)
         near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
+        halves: dict[int, float] = {}
         hazards = (self._hazards(pose, neighbours, obs_x, obs_y, obs_r, len(near.stale_x),
-                                 now_w) if self.s.control.governor else ([], [], [], [], []))
+                                 now_w, halves)
+                   if self.s.control.governor else ([], [], [], [], []))
+        a = self.s.control.a
+        grow = [max(halves.get(rid, a) - a, 0.0) for rid in near.fresh_id]
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
         per_pair = self._law_params.pair_hysteresis
         held = [1.0 if rid in self._held else 0.0 for rid in near.fresh_id] if per_pair \
             else [0.0] * len(near.fresh_x)
         v, u, mode, governed, self.memory = law_step(
-            *pose, rx, ry, rvx, rvy, near.fresh_x, near.fresh_y, held, obs_x, obs_y, obs_r,
+            *pose, rx, ry, rvx, rvy, near.fresh_x, near.fresh_y, held, grow, obs_x, obs_y,
+            obs_r,
             *hazards, self.memory, self._law_params, max(dt, 1e-6))
         if per_pair:       # the pairs' memory, as the law applied it
             b, h = self.s.control.b, self.s.control.hysteresis
@@ -423,13 +428,15 @@ class Agent:
 
     def _hazards(self, pose: tuple[float, float, float],
                  neighbours: Mapping[int, Received[StateMsg]], obs_x: list[float],
-                 obs_y: list[float], obs_r: list[float], n_stale: int, now_w: float
+                 obs_y: list[float], obs_r: list[float], n_stale: int, now_w: float,
+                 halves: dict[int, float] | None = None
                  ) -> tuple[list[float], list[float], list[float], list[float], list[float]]:
         """The safety governor's hazards (agent.governor) around ``pose``: every neighbour
         heard from where it can be by now given its data's age, and the detected
         obstacles grown by a (``obs_*`` without their last ``n_stale`` entries: stale
         robots, which are among the neighbours); with a pose source, every radius also grown
-        by this robot's position uncertainty."""
+        by this robot's position uncertainty. ``halves``, if given, gets each neighbour's
+        half radius [m] by robot id."""
         s = self.s
         grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
         half_base, disc = self._disc
@@ -455,6 +462,8 @@ class Agent:
             hy.append(m.y + north)
             hr.append(full + grow)
             hh.append(half + grow)
+            if halves is not None:
+                halves[rid] = half + grow
             hm.append(1.0 if age <= staleness else 0.0)
         for k in range(len(obs_r) - n_stale):
             hx.append(obs_x[k])

@@ -19,20 +19,21 @@ from agent.law import LawMemory, LawParams, law_step
 
 POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0, 2.0, 0.0)   # m, rad; reference m and m/s
 NBR_X, NBR_Y, NBR_H = [2.0, 3.0, -1.0], [1.0, -2.0, 4.0], [1.0, 0.0, 0.0]
+NBR_G = [0.0, 0.5, 1.0]          # m, the neighbours' governor discs beyond a
 OBS_X, OBS_Y, OBS_R = [6.0], [0.0], [1.0]
 
 
 HAZ_X, HAZ_Y = NBR_X + OBS_X, NBR_Y + OBS_Y
 HAZ_R = [-math.inf] * len(NBR_X) + [r + 1.0 for r in OBS_R]
-HAZ_S = [1.0] * len(NBR_X) + [-math.inf] * len(OBS_R)
+HAZ_S = [1.0 + g for g in NBR_G] + [-math.inf] * len(OBS_R)
 HAZ_M = [1.0] * len(NBR_X) + [0.0] * len(OBS_R)
 
 
 def law(p: ControlParams):
     lp = LawParams.of(p, RobotParams())
-    return LawMemory(), lambda mem: law_step(*POSE, *REF, NBR_X, NBR_Y, NBR_H, OBS_X, OBS_Y,
-                                             OBS_R, HAZ_X, HAZ_Y, HAZ_R, HAZ_S, HAZ_M, mem, lp,
-                                             p.period)[4]
+    return LawMemory(), lambda mem: law_step(*POSE, *REF, NBR_X, NBR_Y, NBR_H, NBR_G, OBS_X,
+                                             OBS_Y, OBS_R, HAZ_X, HAZ_Y, HAZ_R, HAZ_S, HAZ_M,
+                                             mem, lp, p.period)[4]
 
 
 def median_us(setup, p: ControlParams, steps: int, sweep: np.ndarray | None) -> float:

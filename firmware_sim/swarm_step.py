@@ -174,6 +174,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
     nbr_j = np.empty(cap, np.int64)
     nbr_h = np.empty(cap)
+    nbr_g = np.empty(cap)             # m, each neighbour's governor disc beyond a
     o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
     o_k = np.empty(cap, np.int64)
     h_x, h_y, h_r = np.empty(2 * cap), np.empty(2 * cap), np.empty(2 * cap)
@@ -195,6 +196,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         grow = own[i, 3] if own.shape[1] > 3 else 0.0
         n_h = 0
         trails_age = math.nan
+        nbr_g[:m] = 0.0
         for q in range(m if p.governor else 0):
             j = nbr_j[q]
             if not truth and seen[j, 2] == NONE:
@@ -226,6 +228,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                                                       staleness, stop_time, wheel_top,
                                                       p.speed_up, lag, p.turn_up)
             h_r[n_h], h_h[n_h] = full + grow, half + grow
+            nbr_g[q] = max(half + grow - a, 0.0)
             h_x[n_h], h_y[n_h] = view[j, 0] + east, view[j, 1] + north
             h_m[n_h] = age <= staleness
             n_h += 1
@@ -251,6 +254,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                     k += 1
                 elif status == FRESH:
                     nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]
+                    nbr_g[fresh] = nbr_g[q]
                     fresh += 1
             m = fresh
             need = max(need, k)
@@ -270,7 +274,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 if held[i, w] == nbr_j[q]:
                     nbr_h[q] = 1.0
         v, u, mode, allowed, new = law_step(x, y, own[i, 2], rx, ry, rvx, rvy, nbr_x[:m],
-                                            nbr_y[:m], nbr_h[:m], o_x[:k], o_y[:k], o_r[:k],
+                                            nbr_y[:m], nbr_h[:m], nbr_g[:m], o_x[:k],
+                                            o_y[:k], o_r[:k],
                                             h_x[:n_h], h_y[:n_h], h_r[:n_h], h_h[:n_h],
                                             h_m[:n_h], mem, p, period)
         out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2], out_cmd[i, 3] = v, u, mode, allowed

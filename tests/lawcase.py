@@ -26,6 +26,8 @@ class Case(NamedTuple):
     hazards: list[tuple[float, float, float, float, float]] = []  # x, y, full, half, moving
     held: list[float] | None = None   # per neighbour, pair active last period (None: all
     #                                   as the memory's avoiding flag)
+    grow: list[float] | None = None   # per neighbour, its governor's disc beyond a [m]
+    #                                   (None: 0 for all)
 
 
 class Output(NamedTuple):
@@ -50,7 +52,8 @@ def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None 
     params = params or ControlParams()
     mem = mem or LawMemory()
     held = case.held if case.held is not None else [float(mem.avoiding)] * len(case.nbrs)
-    columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs], held,
+    grow = case.grow if case.grow is not None else [0.0] * len(case.nbrs)
+    columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs], held, grow,
                [o[0] for o in case.obstacles], [o[1] for o in case.obstacles],
                [o[2] for o in case.obstacles], [h[0] for h in case.hazards],
                [h[1] for h in case.hazards], [h[2] for h in case.hazards],

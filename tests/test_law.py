@@ -275,6 +275,29 @@ def test_track_does_not_sidestep_a_neighbour_out_of_the_way(nbr):
     assert out.mode[0] == Mode.TRACK and out.u[0] == pytest.approx(0.0)
 
 
+def test_track_passes_the_governor_s_disc_of_a_neighbour_not_its_centre():
+    """A neighbour 3.8 m ahead and 1.9 m right, beyond c, is out of the way of a robot with
+    fresh data. With old data its governor disc is wider than a (1.5 m here: the governor
+    would hold the robot behind it at its pace); then it is in the way up to c + 1.5 m off,
+    and the robot heads asin((b + hysteresis + 1.5)/d) right of its bearing. A neighbour
+    behind on the right as old closes the right: it passes on the left."""
+    ahead, grow = (3.8, -1.9), 1.5
+    bearing, d = math.atan2(ahead[1], ahead[0]), math.hypot(*ahead)
+    fresh = step(single([0, 0, 0], [20, 0], nbrs=[ahead])._replace(grow=[0.0]))
+    assert fresh.u[0] == pytest.approx(0.0) and fresh.memory.passing == 0
+    cone = math.asin((P.b + P.hysteresis + grow) / d)
+    old = step(single([0, 0, 0], [20, 0], nbrs=[ahead])._replace(grow=[grow]))
+    assert old.mode[0] == Mode.TRACK and old.memory.passing == -1
+    assert old.u[0] == pytest.approx(P.K_theta * (bearing - cone))
+    boxed = step(single([0, 0, 0], [20, 0], nbrs=[ahead, (-0.5, -3.5)])
+                 ._replace(grow=[grow, grow]))
+    assert boxed.memory.passing == 1
+    assert boxed.u[0] == pytest.approx(P.K_theta * (bearing + cone))
+    fresh_box = step(single([0, 0, 0], [20, 0], nbrs=[ahead, (-0.5, -3.5)])
+                     ._replace(grow=[0.0, 0.0]))
+    assert fresh_box.u[0] == pytest.approx(0.0)
+
+
 def test_track_does_not_sidestep_a_neighbour_beyond_the_reference():
     out = step(single([0, 0, 0], [2, 0], nbrs=[(3, 0)]))
     assert out.mode[0] == Mode.TRACK and out.u[0] == pytest.approx(0.0)

@@ -30,8 +30,8 @@ point = st.tuples(near, near)
 
 @st.composite
 def cases(draw):
-    """(pose, ref, nbr_x, nbr_y, nbr_held, obs_x, obs_y, obs_r, hazards x, y, full, half,
-    moving, memory)
+    """(pose, ref, nbr_x, nbr_y, nbr_held, nbr_grow, obs_x, obs_y, obs_r, hazards x, y,
+    full, half, moving, memory)
     around a random base point; references and neighbours may coincide with the robot
     (D = 0, r = 0); the hazards are the neighbours and obstacles, as agents build them."""
     bx, by = draw(coord), draw(coord)
@@ -49,10 +49,11 @@ def cases(draw):
         mem = LawMemory(*draw(point), True, draw(st.booleans()),
                         draw(st.sampled_from([-1, 0, 1])), *centre[0], centre[1],
                         draw(wheels), draw(wheels), draw(st.sampled_from([-1, 0, 1])))
-    hazards = [(q[0], q[1], -math.inf, P.a, 1.0) for q in nbrs] + \
+    grow = [draw(st.floats(0.0, 3.0)) for _ in nbrs]
+    hazards = [(q[0], q[1], -math.inf, P.a + g, 1.0) for q, g in zip(nbrs, grow)] + \
         [(o[0][0], o[0][1], o[1] + P.a, -math.inf, 0.0) for o in obs]
     held = [float(draw(st.booleans())) for _ in nbrs]
-    return (pose, ref, [q[0] for q in nbrs], [q[1] for q in nbrs], held,
+    return (pose, ref, [q[0] for q in nbrs], [q[1] for q in nbrs], held, grow,
             [o[0][0] for o in obs], [o[0][1] for o in obs], [o[1] for o in obs],
             *([h[c] for h in hazards] for c in range(5)), mem)
 
@@ -125,7 +126,8 @@ def test_braking_takes_the_whole_ramp_though_speeding_up_does_not():
     standing and asked to go, it gains 2 m/s^2 x T."""
     ground = 2 * math.pi * SPORTY.wheel_radius
     moving = LawMemory(wheel_r=5.0 / ground, wheel_l=5.0 / ground)
-    args = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, [], [], [], [], [], [], [], [], [], [], [])
+    args = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, [], [], [], [], [], [], [], [], [], [], [],
+            [])
     v, _, _, _, _ = law_step(*args, moving, LP_SPORTY, P.period)
     assert v == pytest.approx(5.0 - SPORTY.a_max * P.period)
     v, _, _, _, _ = law_step(0.0, 0.0, 0.0, 5.0, 0.0, *args[5:], LawMemory(), LP_SPORTY,
@@ -145,7 +147,7 @@ def test_compiled_law_equals_the_interpreted_one(case, lp):
 @given(st.floats(0.0, 1e-12), angle)
 def test_reference_at_the_robot(offset, theta):
     v, u, _, _, _ = law_step(1.0, 2.0, theta, 1.0 + offset, 2.0, 0.0, 0.0, [], [], [], [], [],
-                             [], [], [], [], [], [], LawMemory(), LP, P.period)
+                             [], [], [], [], [], [], [], LawMemory(), LP, P.period)
     assert math.isfinite(u) and abs(v) <= P.K * 1e-12 + 1e-15
 
 
@@ -157,9 +159,9 @@ def test_turning_takes_the_ramp_first_unless_the_robot_must_brake():
     step = CART.wheel_ramp * P.period
     mem = LawMemory(wheel_r=2.0, wheel_l=2.0)
     free = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], [], [],
-                    [], [], mem, LP_CART, P.period)[4]
+                    [], [], [], mem, LP_CART, P.period)[4]
     assert free.wheel_r - free.wheel_l == pytest.approx(2 * step)
-    braking = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [1.2], [0.0],
-                       [1.0], [-math.inf], [0.0], mem, LP_CART, P.period)[4]
+    braking = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], [1.2],
+                       [0.0], [1.0], [-math.inf], [0.0], mem, LP_CART, P.period)[4]
     assert braking.wheel_r + braking.wheel_l == pytest.approx(4.0 - 2 * step)
     assert braking.wheel_r == pytest.approx(braking.wheel_l)
