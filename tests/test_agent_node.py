@@ -16,7 +16,7 @@ from common.vocabulary import AgentMode, Mode, StateFlags
 
 
 def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in=0.0,
-               robot=None):
+               robot=None, control=None):
     clock = SimClock()
     net = SharedSwarm(clock)
     ids = np.arange(1, len(poses) + 1)
@@ -25,7 +25,8 @@ def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in
     agents = []
     for rid, pose in zip(ids, poses):
         s = AgentSettings(robot_id=int(rid), swarm="t", initial_pose=tuple(pose),
-                          autostart=True, **({"robot": robot} if robot else {}))
+                          autostart=True, **({"robot": robot} if robot else {}),
+                          **({"control": control} if control else {}))
         agents.append(Agent(s, MirrorMotor(clock), net.port(int(rid)), clock))
     return clock, net, agents
 
@@ -317,6 +318,51 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
     assert pairs[0] == pytest.approx(travel(age / SPLITS) + driven, rel=1e-6)
     assert hr == [-math.inf]
     assert hh == [pytest.approx(agent.s.control.a + max(pairs), rel=1e-6)]
+
+
+def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
+    """The agent hands the law each fresh neighbour's disc width beyond a (A13), the very
+    half radius its governor holds it out of; none with the governor off."""
+    import agent.node as node
+    cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
+                       drive_latency=0.02)
+    seen: list[list[float]] = []
+    halves: list[list[float]] = []
+    law, hazards = node.law_step, Agent._hazards
+
+    def spy_law(*args):
+        seen.append(list(args[10]))                  # nbr_grow
+        return law(*args)
+
+    def spy_hazards(self, *args):
+        out = hazards(self, *args)
+        halves.append(out[3][:1])
+        return out
+
+    monkeypatch.setattr(node, "law_step", spy_law)
+    monkeypatch.setattr(Agent, "_hazards", spy_hazards)
+    for governor in (True, False):
+        seen.clear()
+        halves.clear()
+        clock, net, (agent, other) = make_swarm(
+            [(0.0, 0.0, 0.0), (6.0, 0.0, 0.0)], [(30.0, 0.0), (36.0, 0.0)], robot=cart,
+            control=ControlParams(governor=governor))
+        agent.arm()
+        agent.set_mode(AgentMode.FORMATION)
+        other.arm()
+        other.set_mode(AgentMode.FORMATION)
+        for _ in range(40):
+            agent.tick()
+            other.tick()
+            clock.now += 0.02
+        assert seen and all(len(g) == 1 for g in seen[1:])
+        if governor:
+            assert len(halves) == len(seen)
+            assert [g[0] for g in seen[1:]] == pytest.approx(
+                [h[0] - agent.s.control.a for h in halves[1:]])
+            assert max(g[0] for g in seen[1:]) > 0.0
+        else:
+            assert halves == [] and all(g == [0.0] for g in seen[1:])
 
 
 def test_neighbour_age_is_split_into_stages_and_the_tail_names_the_slow_one():
