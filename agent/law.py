@@ -380,8 +380,10 @@ def in_the_way(heading: float, x: float, y: float, nbr_x: FloatSeq, nbr_y: Float
     way when it is nearer than ``within`` + its growth and than ``limit`` [m], and its cone
     holds the heading: the bearings within asin(P / d) of the one to it, P = ``passing`` +
     its growth, or all within 90 degrees of it nearer than P. The nearest surface of such
-    discs counts; neighbour ``skip`` (the one being passed; -1: none) is left out."""
-    nearest, phi_in, cone_in, j_in = math.inf, 0.0, 0.0, -1
+    discs counts; neighbour ``skip`` (the one being passed; -1: none) is left out. The cone
+    is tested with the heading's projection, no angle per neighbour."""
+    nearest, j_in, reach_in = math.inf, -1, 0.0
+    hx, hy = math.cos(heading), math.sin(heading)
     for j in range(len(nbr_x)):
         if j == skip:
             continue
@@ -389,9 +391,14 @@ def in_the_way(heading: float, x: float, y: float, nbr_x: FloatSeq, nbr_y: Float
         d = math.sqrt(dx * dx + dy * dy)
         grow = max(nbr_grow[j], 0.0)
         if EPS < d < min(within + grow, limit) and d - grow < nearest:
-            phi = math.atan2(dy, dx)
             reach = passing + grow
-            cone = HALF_PI if d <= reach else math.asin(reach / d)
-            if abs(wrap_angle(heading - phi)) < cone:
-                nearest, phi_in, cone_in, j_in = d - grow, phi, cone, j
-    return j_in, phi_in, cone_in
+            along = dx * hx + dy * hy          # m, d times the cosine of the bearing's angle
+            # within asin(reach / d) of the bearing: cos^2 > 1 - (reach / d)^2
+            if along > 0.0 and (d <= reach or along * along > d * d - reach * reach):
+                nearest, j_in, reach_in = d - grow, j, reach
+    if j_in < 0:
+        return -1, 0.0, 0.0
+    dx, dy = nbr_x[j_in] - x, nbr_y[j_in] - y
+    d = math.sqrt(dx * dx + dy * dy)
+    cone = HALF_PI if d <= reach_in else math.asin(reach_in / d)
+    return j_in, math.atan2(dy, dx), cone
