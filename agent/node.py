@@ -375,7 +375,7 @@ class Agent:
                                  now_w, halves)
                    if self.s.control.governor else ([], [], [], [], []))
         a = self.s.control.a
-        grow = [max(halves.get(rid, a) - a, 0.0) for rid in near.fresh_id]
+        grow = [halves.get(rid, a) - a for rid in near.fresh_id]
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         self._last_law = now_m
         per_pair = self._law_params.pair_hysteresis

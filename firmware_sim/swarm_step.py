@@ -228,7 +228,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                                                       staleness, stop_time, wheel_top,
                                                       p.speed_up, lag, p.turn_up)
             h_r[n_h], h_h[n_h] = full + grow, half + grow
-            nbr_g[q] = max(half + grow - a, 0.0)
+            nbr_g[q] = half + grow - a
             h_x[n_h], h_y[n_h] = view[j, 0] + east, view[j, 1] + north
             h_m[n_h] = age <= staleness
             n_h += 1
