@@ -205,9 +205,9 @@ def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: fl
     inner = [pace * data_age * (SPLITS - k - 1) / SPLITS for k in range(SPLITS)]
     trail = (paths, inner, [0.0] * SPLITS, paths, [0.0] * SPLITS, inner)
     half_base, disc = disc_args(control, robot, math.inf)
-    _, beside, _, _ = neighbour_radii(-sensing_range, paths[0], 0.5 * math.pi, pace, 0.0,
-                                      data_age, trail, disc[0], disc[1], half_base,
-                                      *disc[2:], *commitment(control, robot))
+    beside = neighbour_radii(-sensing_range, paths[0], 0.5 * math.pi, pace, 0.0, data_age,
+                             trail, disc[0], disc[1], half_base, *disc[2:],
+                             *commitment(control, robot))[1]
     return SpeedEnvelope(top, head_on, sensing_range, data_age, pace, beside)
 
 

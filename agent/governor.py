@@ -203,11 +203,13 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
                     accel: float,
                     half_base: float, top_speed: float, staleness: float, stop_time: float,
                     wheel_top: float, speed_up: float, lag: float, turn_up: float
-                    ) -> tuple[float, float, float, float]:
-    """(full, half, east, north) for a neighbour reported at (x, y) = this robot's position
-    less (``rel_x``, ``rel_y``) [m], along ``heading`` [rad] at ``speed`` [m/s] and
+                    ) -> tuple[float, float, float, float, float]:
+    """(full, half, east, north, claim) for a neighbour reported at (x, y) = this robot's
+    position less (``rel_x``, ``rel_y``) [m], along ``heading`` [rad] at ``speed`` [m/s] and
     ``turn_rate`` [rad/s], ``age`` [s] ago: the exclusion radii of :func:`neighbour_hazard`
-    of a disc centred (east, north) [m] from its reported position. ``trail``: this
+    of a disc centred (east, north) [m] from its reported position, and the half radius
+    [m] of its claim's disc, which the law passes round (A13): the same as ``half`` unless
+    this robot is behind it (below). ``trail``: this
     robot's motion over each of the splits of the age into equal pieces, the stamp's
     first (agent.trail.Trail.splits): six rows, its path [m] since each split's start
     and since its end, and its displacement (east, north) [m] since the start and since
@@ -226,14 +228,15 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     robot toward where the neighbour can have been (:func:`_own_share`). Where the
     all-round bound round the reported position leaves more room, the disc keeps that
     room, still centred on the capsule's nearest point; silent, the static disc round the
-    reported position."""
+    reported position. Behind a neighbour driving away, where it can be and stop bounds
+    its stop better than its claim does (:func:`_ahead`)."""
     if age > staleness or math.isinf(accel):
         nearer = approach(rel_x, rel_y, heading, speed, turn_rate, age, accel, half_base,
                           speed_up, lag, turn_up)
         full, half = neighbour_hazard(speed, half_base * abs(turn_rate), age,
                                       trail[0][0], a, accel, top_speed, staleness,
                                       stop_time, wheel_top, nearer, speed_up, lag, turn_up)
-        return full, half, 0.0, 0.0
+        return full, half, 0.0, 0.0, half
     east, north, off, seg_x, seg_y = _nearest_on_report(rel_x, rel_y, heading, speed, age)
     dist = math.sqrt(rel_x * rel_x + rel_y * rel_y)
     # unit vectors from this robot toward the report's position and its segment's far end
@@ -244,8 +247,106 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     up = min(speed_up, accel)
     around, reach = _paired(trail, age, speed, turn_rate, a, accel, half_base, top_speed,
                             up, lag, min(turn_up, up), sight)
-    room = max(off - reach, dist - around)
-    return -math.inf, off - room, east, north
+    claim = off - max(off - reach, dist - around)
+    own, to, ahead_x, ahead_y = _ahead(rel_x, rel_y, heading, speed, turn_rate, age, a,
+                                       accel, half_base, up, lag, min(turn_up, up),
+                                       stop_time, 0.5 * (off - claim))
+    if to > 0.0:
+        return -math.inf, to - 2.0 * own, ahead_x, ahead_y, claim
+    return -math.inf, claim, east, north, claim
+
+
+def _ahead(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
+           age: float, a: float, accel: float, half_base: float, up: float, lag: float,
+           turn_up: float, stop_time: float, free: float
+           ) -> tuple[float, float, float, float]:
+    """(free, dist, east, north): the free distance [m] this robot owns toward a neighbour
+    it is behind, by where the neighbour can be and stop (:func:`stop_strip`), with the
+    centre (east, north) [m] from its reported position it is measured toward, ``dist``
+    [m] from this robot; or (``free``, 0, 0, 0) where that gives no more (arguments as
+    :func:`neighbour_radii`, ``up`` and ``turn_up`` at most ``accel``, ``stop_time`` [s]
+    as :func:`neighbour_hazard`).
+
+    The neighbour's stop lies in the strip whenever it last acted, so this robot keeps its
+    own stop a from the strip instead of half the gap from the neighbour's claim
+    (docs/controller.md A10, "A neighbour this robot is behind"); and within its own half
+    of the gap, which the neighbour counts on when it acts again, measured from the part
+    of the report's segment the neighbour can be on by now."""
+    v = abs(speed)
+    none = (free, 0.0, 0.0, 0.0)
+    if v <= 0.0 or half_base <= 0.0:
+        return none
+    hx, hy = math.cos(heading), math.sin(heading)
+    if speed < 0.0:
+        hx, hy = -hx, -hy
+    ahead = rel_x * hx + rel_y * hy             # m, this robot along the report
+    now, lo, across = stop_strip(v, turn_rate, age, accel, half_base, up, lag, turn_up,
+                                 stop_time)
+    if ahead >= lo:
+        return none
+    along = min(max(ahead, max(now, 0.0)), v * age)   # on the report's segment, by now
+    ox, oy = along * hx - rel_x, along * hy - rel_y
+    dist = math.sqrt(ox * ox + oy * oy)
+    if dist <= EPS:
+        return none
+    bx, by = ox / dist, oy / dist
+    # the least of the strip's points toward that centre, less a
+    strip = (lo * (hx * bx + hy * by) - rel_x * bx - rel_y * by
+             - across * abs(hx * by - hy * bx) - a)
+    rho = swerve(speed, turn_rate, age, accel, half_base, up, lag, turn_up)
+    own = min(0.5 * (dist - rho - a), strip)
+    if own <= free:
+        return none
+    return own, dist, along * hx, along * hy
+
+
+def stop_strip(speed: float, turn_rate: float, age: float, accel: float, half_base: float,
+               up: float, lag: float, turn_up: float, stop_time: float
+               ) -> tuple[float, float, float]:
+    """(now, lo, across) [m] for a neighbour reported ``age`` [s] ago driving at ``speed``
+    [m/s] (> 0, along its reported heading) and turning at ``turn_rate`` [rad/s], its
+    wheels (2 ``half_base`` [m] apart) braking at ``accel`` [m/s^2] and following its
+    commands ``lag`` [s] late, its law speeding it up by at most ``up`` and its wheels'
+    half difference by at most ``turn_up`` [m/s^2] (A17), a dead agent's drivers going on
+    for ``stop_time`` [s] before they brake. Measured from its reported position along
+    and across its reported heading: it is at least ``now`` along by now; and from now
+    until it is at rest, should it have last acted at any time since its stamp, at least
+    ``lo`` along and at most ``across`` across (lo = -inf: no bound).
+
+    Braking at the full ramp from its stamp, after its wheels' lag, is the least it can
+    have gone, along every heading its turn allows (the cosine of the largest); after
+    stopping it can have reversed at its speed-up; across, it departs by at most its
+    speed times its heading's departure, integrated until it is at rest; and where that
+    departure can pass 90 degrees it comes back along its report by at most its path
+    since then."""
+    go = max(speed - accel * lag, 0.0)          # m/s, its speed at its stamp, at least
+    t_s = go / accel                            # s, the soonest it can be at rest
+    bend = accel * lag * lag / half_base        # rad, its heading's departure in the lag
+    spin = turn_up / half_base                  # rad/s^2, how fast its turn rate can grow
+    u0 = abs(turn_rate)
+    brake = min(age, t_s)
+    dev = u0 * brake + bend + 0.5 * spin * brake * brake
+    if speed <= 0.0 or dev >= 0.5 * math.pi:
+        return 0.0, -math.inf, math.inf
+    over = max(age - t_s, 0.0)                  # s, it may have reversed for that long
+    reverse = accel * lag + up * over           # m/s, at most that fast
+    now = ((go * brake - 0.5 * accel * brake * brake) * math.cos(dev)
+           - 0.5 * up * over * over - accel * lag * over)
+    # should it die now: its speed, turn rate, heading's departure and time until at rest
+    fast = speed + accel * lag + up * age
+    turn = u0 + accel * lag / half_base + spin * age
+    dev_age = u0 * age + bend + 0.5 * spin * age * age
+    rest = stop_time + (fast + turn * half_base) / accel
+    brakes = stopping(fast, accel, 0.0, turn * half_base)
+    swing = dev_age + turn * rest
+    lo = (now - reverse * stop_time - reverse * reverse / (2.0 * accel)
+          - (fast * stop_time + brakes) * min(max(swing - 0.5 * math.pi, 0.0), 1.0))
+    a2 = age * age
+    across = ((speed + accel * lag) * (0.5 * u0 * a2 + bend * age + spin * a2 * age / 6.0)
+              + up * (u0 * a2 * age / 3.0 + 0.5 * bend * a2 + spin * a2 * a2 / 8.0)
+              + fast * stop_time * (dev_age + 0.5 * turn * stop_time)
+              + brakes * min(swing, 1.0))
+    return now, lo, across
 
 
 def _nearest_on_report(rel_x: float, rel_y: float, heading: float, speed: float,
@@ -300,7 +401,8 @@ def swerve(speed: float, turn_rate: float, age: float, accel: float, half_base: 
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
     up = min(speed_up, accel)
-    return _paired(_STILL, age, speed, turn_rate, 0.0, accel, half_base, math.inf, up, lag,
+    # (a top speed of 0: the all-round travel it bounds is not wanted here)
+    return _paired(_STILL, age, speed, turn_rate, 0.0, accel, half_base, 0.0, up, lag,
                    min(turn_up, up))[1]
 
 

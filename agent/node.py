@@ -435,8 +435,8 @@ class Agent:
         heard from where it can be by now given its data's age, and the detected
         obstacles grown by a (``obs_*`` without their last ``n_stale`` entries: stale
         robots, which are among the neighbours); with a pose source, every radius also grown
-        by this robot's position uncertainty. ``halves``, if given, gets each neighbour's
-        half radius [m] by robot id."""
+        by this robot's position uncertainty. ``halves``, if given, gets the half radius [m]
+        of each neighbour's claim, which the law passes round (A13), by robot id."""
         s = self.s
         grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
         half_base, disc = self._disc
@@ -455,15 +455,15 @@ class Agent:
                 continue
             age = now_w - m.stamp
             moved = self.trail.splits(m.stamp, age, SPLITS)
-            full, half, east, north = neighbour_radii(-dx, -dy, m.theta, m.v, m.u, age,
-                                                      moved, disc[0], disc[1], half_base,
-                                                      *disc[2:], *self._commit)
+            full, half, east, north, claim = neighbour_radii(
+                -dx, -dy, m.theta, m.v, m.u, age, moved, disc[0], disc[1], half_base,
+                *disc[2:], *self._commit)
             hx.append(m.x + east)
             hy.append(m.y + north)
             hr.append(full + grow)
             hh.append(half + grow)
             if halves is not None:
-                halves[rid] = half + grow
+                halves[rid] = claim + grow
             hm.append(1.0 if age <= staleness else 0.0)
         for k in range(len(obs_r) - n_stale):
             hx.append(obs_x[k])

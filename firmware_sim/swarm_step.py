@@ -221,14 +221,12 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                     trail[3, piece] = now[1] - start[1]
                     trail[4, piece] = now[0] - end[0]
                     trail[5, piece] = now[1] - end[1]
-            full, half, east, north = neighbour_radii(x - view[j, 0], y - view[j, 1],
-                                                      view[j, 2], view[j, 3], view[j, 4],
-                                                      age, trail, a, p.accel,
-                                                      0.5 * p.wheel_base, top_speed,
-                                                      staleness, stop_time, wheel_top,
-                                                      p.speed_up, lag, p.turn_up)
+            full, half, east, north, claim = neighbour_radii(
+                x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3], view[j, 4], age,
+                trail, a, p.accel, 0.5 * p.wheel_base, top_speed, staleness, stop_time,
+                wheel_top, p.speed_up, lag, p.turn_up)
             h_r[n_h], h_h[n_h] = full + grow, half + grow
-            nbr_g[q] = half + grow - a
+            nbr_g[q] = claim + grow - a
             h_x[n_h], h_y[n_h] = view[j, 0] + east, view[j, 1] + north
             h_m[n_h] = age <= staleness
             n_h += 1

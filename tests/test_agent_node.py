@@ -321,13 +321,15 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
 
 
 def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
-    """The agent hands the law each fresh neighbour's disc width beyond a (A13), the very
-    half radius its governor holds it out of; none with the governor off."""
+    """The agent hands the law each fresh neighbour's disc width beyond a (A13): the half
+    radius of its claim, which the governor holds it out of unless it is behind the
+    neighbour (then the stop strip's, smaller: A10); none with the governor off."""
     import agent.node as node
     cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
                        drive_latency=0.02)
     seen: list[list[float]] = []
     halves: list[list[float]] = []
+    claims: list[list[float]] = []
     law, hazards = node.law_step, Agent._hazards
 
     def spy_law(*args):
@@ -337,6 +339,7 @@ def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
     def spy_hazards(self, *args):
         out = hazards(self, *args)
         halves.append(out[3][:1])
+        claims.append(list(args[-1].values()))       # the halves it was handed
         return out
 
     monkeypatch.setattr(node, "law_step", spy_law)
@@ -344,6 +347,7 @@ def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
     for governor in (True, False):
         seen.clear()
         halves.clear()
+        claims.clear()
         clock, net, (agent, other) = make_swarm(
             [(0.0, 0.0, 0.0), (6.0, 0.0, 0.0)], [(30.0, 0.0), (36.0, 0.0)], robot=cart,
             control=ControlParams(governor=governor))
@@ -357,10 +361,13 @@ def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
             clock.now += 0.02
         assert seen and all(len(g) == 1 for g in seen[1:])
         if governor:
-            assert len(halves) == len(seen)
+            assert len(claims) == len(seen)
             assert [g[0] for g in seen[1:]] == pytest.approx(
-                [h[0] - agent.s.control.a for h in halves[1:]])
+                [c[0] - agent.s.control.a for c in claims[1:]])
             assert max(g[0] for g in seen[1:]) > 0.0
+            # behind the other robot as it drives off: the strip holds it less
+            assert any(h[0] < c[0] - 1e-6 for h, c in zip(halves[1:], claims[1:]))
+            assert all(h[0] <= c[0] + 1e-9 for h, c in zip(halves[1:], claims[1:]))
         else:
             assert halves == [] and all(g == [0.0] for g in seen[1:])
 

@@ -19,6 +19,7 @@ from agent.governor import (
     silent_radius,
     slip_margin,
     speed_limits,
+    stop_strip,
     stopping,
     turn_limit,
 )
@@ -119,12 +120,13 @@ def _segment_distance(p: tuple, s: tuple, e: tuple) -> float:
 
 
 def _drive(v: float, u: float, accel: float, half: float, age: float, plan: list, steps: int
-           ) -> list[tuple[float, float]]:
-    """Positions [m] every age/steps of a robot reported at the origin along x at v and u,
-    each wheel's ground speed changing at up to accel (piecewise, per ``plan``)."""
+           ) -> list[tuple[float, float, float, float, float]]:
+    """States (x [m], y [m], heading [rad], right and left wheel ground speeds [m/s]) every
+    age/steps of a robot reported at the origin along x at v and u, each wheel's ground
+    speed changing at up to accel (piecewise, per ``plan``)."""
     x = y = theta = 0.0
     right, left = v + u * half, v - u * half
-    out = [(x, y)]
+    out = [(x, y, theta, right, left)]
     dt = age / steps
     for k in range(steps):
         ar, al = plan[k * len(plan) // steps]
@@ -134,8 +136,24 @@ def _drive(v: float, u: float, accel: float, half: float, age: float, plan: list
         left += al * accel * dt
         x, y, theta = arc_step(x, y, theta, 0.5 * (mid_r + mid_l) * dt,
                                (mid_r - mid_l) / (2.0 * half) * dt)
-        out.append((x, y))
+        out.append((x, y, theta, right, left))
     return out
+
+
+def _stop(state: tuple[float, float, float, float, float], half: float, accel: float,
+          hold: float, dt: float = 1e-3) -> tuple[float, float]:
+    """Where [m] a robot in ``state`` (as :func:`_drive`) comes to rest should its agent
+    die: its drivers hold the wheels for ``hold`` s, then ramp each to rest at accel."""
+    x, y, theta, right, left = state
+    x, y, theta = arc_step(x, y, theta, 0.5 * (right + left) * hold,
+                           (right - left) / (2.0 * half) * hold)
+    while right != 0.0 or left != 0.0:
+        r0, l0 = right, left
+        right = _toward(right, 0.0, accel * dt)
+        left = _toward(left, 0.0, accel * dt)
+        x, y, theta = arc_step(x, y, theta, 0.25 * (r0 + right + l0 + left) * dt,
+                               0.5 * (r0 + right - l0 - left) / (2.0 * half) * dt)
+    return x, y
 
 
 @settings(max_examples=300, deadline=None)
@@ -152,10 +170,12 @@ def test_pairing_the_neighbour_s_travel_with_this_robot_s_path_keeps_stops_apart
     p(t), keeping its stop within half of |q(t) - p(t)| beyond a. This robot drove from
     ``start`` in four straight legs to p and keeps its stop within half of |p - s| beyond
     the half radius of :func:`neighbour_radii`, which pairs the two over the age's
-    splits. The two stops end at least a apart, whenever j last acted."""
+    splits, or, behind j, a from where j stops (:func:`stop_strip`). The two stops end at
+    least a apart, whenever j last acted and wherever it stopped within its half."""
     steps = 64
     half_base = 0.3
-    q = _drive(v, u, ACCEL, half_base, age, plan, steps)
+    states = _drive(v, u, ACCEL, half_base, age, plan, steps)
+    q = [state[:2] for state in states]
     p = [start]
     for k in range(steps):
         heading, speed = legs[k * len(legs) // steps]
@@ -170,15 +190,16 @@ def test_pairing_the_neighbour_s_travel_with_this_robot_s_path_keeps_stops_apart
     trail = ([walked[i] for i in ends[:-1]], [walked[i] for i in ends[1:]],
              [now[0] - p[i][0] for i in ends[:-1]], [now[1] - p[i][1] for i in ends[:-1]],
              [now[0] - p[i][0] for i in ends[1:]], [now[1] - p[i][1] for i in ends[1:]])
-    full, half, east, north = neighbour_radii(now[0], now[1], 0.0, v, u, age, trail, A,
+    full, half, east, north, _ = neighbour_radii(now[0], now[1], 0.0, v, u, age, trail, A,
                                               ACCEL, half_base, TOP, STALE, STOP, 8.0,
                                               math.inf, 0.0, math.inf)
     own = 0.5 * (math.dist(now, (east, north)) - half)
     assert full == -math.inf
     for k in range(steps + 1):
         theirs = 0.5 * (math.dist(q[k], p[k]) - A)
-        if own >= 0.0 and theirs >= 0.0:
-            assert math.dist(now, q[k]) - own - theirs >= A - 1e-6
+        stop = _stop(states[k], half_base, ACCEL, STOP)
+        if own >= 0.0 and math.dist(stop, q[k]) <= theirs:
+            assert math.dist(now, stop) - own >= A - 1e-6
 
 
 def test_a_neighbour_driving_on_beside_this_robot_is_met_where_it_is_now():
@@ -193,7 +214,7 @@ def test_a_neighbour_driving_on_beside_this_robot_is_met_where_it_is_now():
     reported = (now_n[0] - v_n * age * math.cos(heading_n),
                 now_n[1] - v_n * age * math.sin(heading_n))
     trail = _straight(speed, heading, age)
-    full, half, east, north = neighbour_radii(-reported[0], -reported[1], heading_n, v_n,
+    full, half, east, north, _ = neighbour_radii(-reported[0], -reported[1], heading_n, v_n,
                                               0.0, age, trail, 1.0, 6.0, 0.25, 6.0, 0.8,
                                               0.13, 6.0, 6.0, 0.03, 6.0)
     centre = (reported[0] + east, reported[1] + north)
@@ -216,7 +237,7 @@ def test_a_neighbour_met_head_on_with_old_data_is_paired_with_this_robot_s_path(
     args = (A, ACCEL, 0.3, TOP, STALE, STOP, 8.0, math.inf, 0.0, math.inf)
 
     def room(trail):         # m, from this robot to the edge of the neighbour's disc
-        _, half, east, north = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trail,
+        _, half, east, north, _ = neighbour_radii(-6.0, 0.0, math.pi, speed, 0.0, age, trail,
                                                *args)
         return math.hypot(-6.0 - east, north) - half
 
@@ -345,6 +366,65 @@ def test_a_neighbour_that_speeds_up_slowly_is_never_nearer_than_its_report_allow
             wv, ww = 0.5 * (right + left), 0.5 * (right - left)
         x, y, theta = arc_step(x, y, theta, wv * dt, ww / half * dt)
         assert math.hypot(point[0] - x, point[1] - y) >= d0 - nearer - 1e-6
+
+
+@settings(max_examples=300, deadline=None)
+@example(v=2.5, u=0.0, accel=6.0, up=2.0, turn=1.0, base=0.6, age=0.55, lag=(0.02, 0.01),
+         before=(0.0, 0.0), plan=[(1.0, 1.0)] * 6, died=1.0, hold=0.1)  # the fast robot
+@example(v=0.2, u=0.0, accel=2.0, up=2.0, turn=1.0, base=0.8, age=0.6, lag=(0.02, 0.02),
+         before=(-1.0, 0.0), plan=[(-1.0, 0.0)] * 6, died=1.0, hold=0.2)  # reverses
+@given(v=st.floats(0.05, 3.0), u=st.floats(-2.0, 2.0), accel=st.floats(2.0, 25.0),
+       up=st.floats(0.5, 2.0), turn=st.floats(0.05, 1.0), base=st.floats(0.3, 0.8),
+       age=st.floats(0.01, 0.6), lag=st.tuples(st.floats(0.01, 0.02), st.floats(0.0, 0.03)),
+       before=st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0)),
+       plan=st.lists(st.tuples(st.sampled_from([-1.0, 0.0, 1.0]),
+                               st.sampled_from([-1.0, 0.0, 1.0])), min_size=6, max_size=6),
+       died=st.floats(0.0, 1.0), hold=st.floats(0.05, 0.2))
+def test_a_neighbour_stops_in_the_strip_ahead_of_its_report(
+        v, u, accel, up, turn, base, age, lag, before, plan, died, hold):
+    """A10, a neighbour this robot is behind: reported at the origin driving along x at v
+    and turning at u, it keeps the commitment of A17 (as the test above) and dies at any
+    instant of the age; its drivers go on with the commands already sent for ``hold`` s,
+    then ramp each wheel to rest. By the age it is at least :func:`stop_strip`'s ``now``
+    along x, and from then until at rest at least ``lo`` along and at most ``across``
+    across."""
+    period, latency = lag
+    half = 0.5 * base
+    now, lo, across = stop_strip(v, u, age, accel, half, up, period + latency, turn * up,
+                                 hold + latency)
+    sv, sw = v, u * half
+    wv = v + before[0] * accel * period
+    ww = sw + before[1] * accel * period
+    x = y = theta = 0.0
+    dt = age / 600
+    death = died * age
+    history = [(sv, sw)]
+    k = 0
+    while k * dt < age or wv != 0.0 or ww != 0.0:
+        t = k * dt
+        if t < death:                                  # alive: its law's next set-point
+            cv, cw = plan[min(int(t / age * len(plan)), len(plan) - 1)]
+            sv = _committed(sv, cv, up * dt, accel * dt)
+            sw = _committed(sw, cw, turn * up * dt, accel * dt)
+        history.append((sv, sw))
+        right, left = wv + ww, wv - ww
+        if t < death + hold + latency:                 # the drivers follow the commands
+            if t + dt >= latency:
+                tv, tw = history[max(len(history) - 1 - round(latency / dt), 0)]
+                right = _toward(right, tv + tw, accel * dt)
+                left = _toward(left, tv - tw, accel * dt)
+        else:                                          # the watchdog: each wheel to rest
+            right, left = _toward(right, 0.0, accel * dt), _toward(left, 0.0, accel * dt)
+        mid_v, mid_w = 0.5 * (0.5 * (right + left) + wv), 0.5 * (0.5 * (right - left) + ww)
+        wv, ww = 0.5 * (right + left), 0.5 * (right - left)
+        x, y, theta = arc_step(x, y, theta, mid_v * dt, mid_w / half * dt)
+        k += 1
+        if abs(k * dt - age) < 0.5 * dt:
+            assert x >= now - 1e-6
+        if k * dt >= age:
+            assert x >= lo - 1e-6
+            assert abs(y) <= across + 1e-6
+        assert k < 10 ** 6
 
 
 def test_a_neighbour_that_speeds_up_slowly_is_grown_less_head_on():
