@@ -107,18 +107,20 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
             a: float, accel: float, half_base: float, top_speed: float, up: float,
             lag: float, turn_up: float,
             sight: tuple[float, float, float, float, float, float] = _BLIND
-            ) -> tuple[float, float]:
-    """(around, reach) [m] of a neighbour heard from on wheels of finite ``accel``
+            ) -> tuple[float, float, float]:
+    """(around, reach, rho) [m] of a neighbour heard from on wheels of finite ``accel``
     (arguments as :func:`neighbour_radii`, ``up`` its speed-up at most ``accel``,
     ``turn_up`` its wheels' half difference's at most ``up``): over the
     splits of the ``age`` (>= 0) paired with this robot's ``trail``, the largest of a +
     how far it can have travelled all round + this robot's share of its own motion, and
-    of a + rho (:func:`swerve`; inf when ``half_base`` <= 0) + that share
+    of a + rho (:func:`swerve`; inf when ``half_base`` <= 0) + that share, and rho at the
+    age itself
     (:func:`_own_share`, seen along ``sight``: this robot's distance [m] to the report's
     position and the unit vector toward it, its distance to the report's segment and the
     unit vector toward the segment's far end). Both formulas are written here once, in
     one loop, as the agent runs it for every neighbour every period."""
     around = reach = -math.inf
+    rho = math.inf
     paths, inner = trail[0], trail[1]
     splits = len(paths)
     dist, sx, sy, off, ex, ey = sight
@@ -143,7 +145,7 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
             rho = min(half_accel * t2 + accel_lag * t + speed * swing,
                       half_up * t2 + accel_lag2 + (speed + accel_lag + up * t) * swing)
         reach = max(reach, a + rho + _own_share(trail, k, sx, sy, ex, ey, off, rho))
-    return around, reach
+    return around, reach, rho
 
 
 def _own_share(trail: FloatRows, k: int, sx: float, sy: float, ex: float,
@@ -245,12 +247,12 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     sight = (dist, -rel_x / max(dist, EPS), -rel_y / max(dist, EPS), off,
              far_x / max(far, EPS), far_y / max(far, EPS))
     up = min(speed_up, accel)
-    around, reach = _paired(trail, age, speed, turn_rate, a, accel, half_base, top_speed,
-                            up, lag, min(turn_up, up), sight)
+    around, reach, rho = _paired(trail, age, speed, turn_rate, a, accel, half_base,
+                                 top_speed, up, lag, min(turn_up, up), sight)
     claim = off - max(off - reach, dist - around)
     own, to, ahead_x, ahead_y = _ahead(rel_x, rel_y, heading, speed, turn_rate, age, a,
                                        accel, half_base, up, lag, min(turn_up, up),
-                                       stop_time, 0.5 * (off - claim))
+                                       stop_time, rho, 0.5 * (off - claim))
     if to > 0.0:
         return -math.inf, to - 2.0 * own, ahead_x, ahead_y, claim
     return -math.inf, claim, east, north, claim
@@ -258,20 +260,21 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
 
 def _ahead(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
            age: float, a: float, accel: float, half_base: float, up: float, lag: float,
-           turn_up: float, stop_time: float, free: float
+           turn_up: float, stop_time: float, rho: float, free: float
            ) -> tuple[float, float, float, float]:
     """(free, dist, east, north): the free distance [m] this robot owns toward a neighbour
     it is behind, by where the neighbour can be and stop (:func:`stop_strip`), with the
     centre (east, north) [m] from its reported position it is measured toward, ``dist``
     [m] from this robot; or (``free``, 0, 0, 0) where that gives no more (arguments as
     :func:`neighbour_radii`, ``up`` and ``turn_up`` at most ``accel``, ``stop_time`` [s]
-    as :func:`neighbour_hazard`).
+    as :func:`neighbour_hazard`, ``rho`` [m] as :func:`swerve`).
 
     The neighbour's stop lies in the strip whenever it last acted, so this robot keeps its
     own stop a from the strip instead of half the gap from the neighbour's claim
     (docs/controller.md A10, "A neighbour this robot is behind"); and within its own half
     of the gap, which the neighbour counts on when it acts again, measured from the part
-    of the report's segment the neighbour can be on by now."""
+    of the report's segment the neighbour can be on by now. The cheap bounds come first:
+    an agent runs this for every neighbour every period."""
     v = abs(speed)
     none = (free, 0.0, 0.0, 0.0)
     if v <= 0.0 or half_base <= 0.0:
@@ -280,24 +283,47 @@ def _ahead(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: 
     if speed < 0.0:
         hx, hy = -hx, -hy
     ahead = rel_x * hx + rel_y * hy             # m, this robot along the report
-    now, lo, across = stop_strip(v, turn_rate, age, accel, half_base, up, lag, turn_up,
-                                 stop_time)
-    if ahead >= lo:
+    # not behind its braking distance; or its half can be no more than the claim's, half
+    # the gap to the segment's far end beyond rho and a
+    if (ahead >= v * v / (2.0 * accel)
+            or math.sqrt(rel_x * rel_x + rel_y * rel_y) + v * age - rho - a <= 2.0 * free):
         return none
+    now = _progress(v, turn_rate, age, accel, half_base, up, lag, turn_up)
     along = min(max(ahead, max(now, 0.0)), v * age)   # on the report's segment, by now
     ox, oy = along * hx - rel_x, along * hy - rel_y
     dist = math.sqrt(ox * ox + oy * oy)
-    if dist <= EPS:
+    half = 0.5 * (dist - rho - a)
+    if now == -math.inf or dist <= EPS or half <= free:
+        return none
+    lo, across = _strip(now, v, turn_rate, age, accel, half_base, up, lag, turn_up,
+                        stop_time)
+    if ahead >= lo:
         return none
     bx, by = ox / dist, oy / dist
     # the least of the strip's points toward that centre, less a
-    strip = (lo * (hx * bx + hy * by) - rel_x * bx - rel_y * by
-             - across * abs(hx * by - hy * bx) - a)
-    rho = swerve(speed, turn_rate, age, accel, half_base, up, lag, turn_up)
-    own = min(0.5 * (dist - rho - a), strip)
+    own = min(half, lo * (hx * bx + hy * by) - rel_x * bx - rel_y * by
+              - across * abs(hx * by - hy * bx) - a)
     if own <= free:
         return none
     return own, dist, along * hx, along * hy
+
+
+def _progress(speed: float, turn_rate: float, age: float, accel: float, half_base: float,
+              up: float, lag: float, turn_up: float) -> float:
+    """The least distance [m] along its reported heading from its reported position a
+    neighbour can be at by now (arguments as :func:`stop_strip`; -inf: no bound): braking
+    at the full ramp from its stamp, after its wheels' lag, along every heading its turn
+    allows (the cosine of the largest), then reversing at its speed-up once stopped."""
+    go = max(speed - accel * lag, 0.0)          # m/s, its speed at its stamp, at least
+    t_s = go / accel                            # s, the soonest it can be at rest
+    brake = min(age, t_s)
+    dev = (abs(turn_rate) * brake + accel * lag * lag / half_base
+           + 0.5 * turn_up / half_base * brake * brake)
+    if speed <= 0.0 or dev >= 0.5 * math.pi:
+        return -math.inf
+    over = max(age - t_s, 0.0)                  # s, it may have reversed for that long
+    return ((go * brake - 0.5 * accel * brake * brake) * math.cos(dev)
+            - 0.5 * up * over * over - accel * lag * over)
 
 
 def stop_strip(speed: float, turn_rate: float, age: float, accel: float, half_base: float,
@@ -305,33 +331,36 @@ def stop_strip(speed: float, turn_rate: float, age: float, accel: float, half_ba
                ) -> tuple[float, float, float]:
     """(now, lo, across) [m] for a neighbour reported ``age`` [s] ago driving at ``speed``
     [m/s] (> 0, along its reported heading) and turning at ``turn_rate`` [rad/s], its
-    wheels (2 ``half_base`` [m] apart) braking at ``accel`` [m/s^2] and following its
-    commands ``lag`` [s] late, its law speeding it up by at most ``up`` and its wheels'
-    half difference by at most ``turn_up`` [m/s^2] (A17), a dead agent's drivers going on
-    for ``stop_time`` [s] before they brake. Measured from its reported position along
-    and across its reported heading: it is at least ``now`` along by now; and from now
-    until it is at rest, should it have last acted at any time since its stamp, at least
-    ``lo`` along and at most ``across`` across (lo = -inf: no bound).
+    wheels (2 ``half_base`` [m] apart) braking at ``accel`` [m/s^2] (finite) and following
+    its commands ``lag`` [s] late, its law speeding it up by at most ``up`` and its
+    wheels' half difference by at most ``turn_up`` [m/s^2] (A17), a dead agent's drivers
+    going on for ``stop_time`` [s] before they brake. Measured from its reported position
+    along and across its reported heading: it is at least ``now`` along by now
+    (:func:`_progress`); and from now until it is at rest, should it have last acted at any
+    time since its stamp, at least ``lo`` along and at most ``across`` across (lo = -inf:
+    no bound).
 
-    Braking at the full ramp from its stamp, after its wheels' lag, is the least it can
-    have gone, along every heading its turn allows (the cosine of the largest); after
-    stopping it can have reversed at its speed-up; across, it departs by at most its
-    speed times its heading's departure, integrated until it is at rest; and where that
-    departure can pass 90 degrees it comes back along its report by at most its path
-    since then."""
-    go = max(speed - accel * lag, 0.0)          # m/s, its speed at its stamp, at least
-    t_s = go / accel                            # s, the soonest it can be at rest
+    Once stopped it can have reversed at its speed-up and go on back until its wheels
+    rest; across, it departs by at most its speed times its heading's departure,
+    integrated until it is at rest; and where that departure can pass 90 degrees it
+    comes back along its report by at most its path since then."""
+    now = _progress(speed, turn_rate, age, accel, half_base, up, lag, turn_up)
+    if now == -math.inf:
+        return now, -math.inf, math.inf
+    lo, across = _strip(now, speed, turn_rate, age, accel, half_base, up, lag, turn_up,
+                        stop_time)
+    return now, lo, across
+
+
+def _strip(now: float, speed: float, turn_rate: float, age: float, accel: float,
+           half_base: float, up: float, lag: float, turn_up: float, stop_time: float
+           ) -> tuple[float, float]:
+    """(lo, across) of :func:`stop_strip` (same arguments), ``now`` its first value."""
     bend = accel * lag * lag / half_base        # rad, its heading's departure in the lag
     spin = turn_up / half_base                  # rad/s^2, how fast its turn rate can grow
     u0 = abs(turn_rate)
-    brake = min(age, t_s)
-    dev = u0 * brake + bend + 0.5 * spin * brake * brake
-    if speed <= 0.0 or dev >= 0.5 * math.pi:
-        return 0.0, -math.inf, math.inf
-    over = max(age - t_s, 0.0)                  # s, it may have reversed for that long
+    over = max(age - max(speed - accel * lag, 0.0) / accel, 0.0)   # s, reversing
     reverse = accel * lag + up * over           # m/s, at most that fast
-    now = ((go * brake - 0.5 * accel * brake * brake) * math.cos(dev)
-           - 0.5 * up * over * over - accel * lag * over)
     # should it die now: its speed, turn rate, heading's departure and time until at rest
     fast = speed + accel * lag + up * age
     turn = u0 + accel * lag / half_base + spin * age
@@ -346,7 +375,7 @@ def stop_strip(speed: float, turn_rate: float, age: float, accel: float, half_ba
               + up * (u0 * a2 * age / 3.0 + 0.5 * bend * a2 + spin * a2 * a2 / 8.0)
               + fast * stop_time * (dev_age + 0.5 * turn * stop_time)
               + brakes * min(swing, 1.0))
-    return now, lo, across
+    return lo, across
 
 
 def _nearest_on_report(rel_x: float, rel_y: float, heading: float, speed: float,

@@ -165,8 +165,9 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     ref_vy) [m/s] the reference's velocity p_d_dot(t); ``nbr_x``,
     ``nbr_y`` the neighbours in range (extrapolated to now) and ``nbr_held`` 1.0 for each
     whose pair was active in the last period (:func:`pair_active`), else 0.0, and
-    ``nbr_grow`` [m] how much wider than a the governor's disc of each is (its half
-    radius less a, below 0 taken as 0; 0 without the governor); ``obs_x``, ``obs_y``,
+    ``nbr_grow`` [m] how much wider than a the governor's disc of each one's claim is
+    (its half radius less a, below 0 taken as 0; 0 without the governor:
+    agent.governor.neighbour_radii); ``obs_x``, ``obs_y``,
     ``obs_r``
     the obstacles in range (centre and radius); ``haz_*`` the governor's hazards (centre,
     exclusion radii [m] of the whole and of the half free distance, moving or not:

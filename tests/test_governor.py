@@ -603,7 +603,8 @@ def test_a_hazard_counts_with_the_cosine_of_its_angle_beyond_the_heading(bearing
 def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path, up):
     """The discs are the largest over the splits of the age, each split's reach to its end
     paired with this robot's path from its start: the same, bit for bit, as pairing each
-    split alone (the splits a later one dominates, with the same path, are skipped)."""
+    split alone (the splits a later one dominates, with the same path, are skipped); rho
+    is the last split's, the whole age's."""
     paths = [sum(path[k:]) for k in range(SPLITS)]     # the path since each split's start
     trail = (paths, paths[1:] + [0.0], paths, [0.0] * SPLITS, paths[1:] + [0.0],
              [0.0] * SPLITS)                                   # straight along x
@@ -611,7 +612,7 @@ def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path
     got = _paired(trail, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04, up, sight)
     alone = [_paired([[row[k]] for row in trail], age * (k + 1) / SPLITS, speed, turn_rate,
                      A, ACCEL, 0.4, TOP, up, 0.04, up, sight) for k in range(SPLITS)]
-    assert got == (max(r[0] for r in alone), max(r[1] for r in alone))
+    assert got == (max(r[0] for r in alone), max(r[1] for r in alone), alone[-1][2])
 
 
 def test_a_static_hazard_abeam_does_not_limit_but_a_moving_one_does():
