@@ -27,6 +27,9 @@ import numpy as np
 
 log = logging.getLogger(__name__)
 
+PAIR_SPREAD = 1e-4   # s, the most two monotonic readings round a wall-clock reading may differ
+PAIR_TRIES = 10      # readings of the two clocks before the closest pair is taken
+
 
 class Clock(Protocol):
     def monotonic(self) -> float: ...          # s, for scheduling and timeouts
@@ -111,15 +114,30 @@ class FixedRateLoop:
         self.stats = LoopStats(period)
         self._running = False
 
+    def _on_grid(self, phase: float) -> float:
+        """The monotonic time [s] of the first instant at ``phase`` [s] of the wall-clock
+        grid (n period + phase). The wall clock is read between two monotonic readings, again
+        while they are more than PAIR_SPREAD apart: a process preempted between the two
+        clocks (many starting at once on a busy host) would otherwise tick off the grid,
+        by the time it lost, for the whole run."""
+        spread, mono, wall = math.inf, 0.0, 0.0
+        for _ in range(PAIR_TRIES):
+            before = self.clock.monotonic()
+            now = self.clock.wall()
+            after = self.clock.monotonic()
+            if after - before < spread:
+                spread, mono, wall = after - before, 0.5 * (before + after), now
+            if spread <= PAIR_SPREAD:
+                break
+        return mono + (phase - wall) % self.period
+
     def stop(self) -> None:
         """Ask the loop to return after the current tick (safe from a signal handler)."""
         self._running = False
 
     def run(self, tick: Callable[[int, float], None], max_ticks: int | None = None) -> None:
         self._running = True
-        start = self.clock.monotonic()
-        if self.phase is not None:
-            start += (self.phase - self.clock.wall()) % self.period
+        start = self.clock.monotonic() if self.phase is None else self._on_grid(self.phase)
         k = 0
         while self._running and (max_ticks is None or self.stats.ticks < max_ticks):
             deadline = start + k * self.period
