@@ -247,27 +247,29 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     sight = (dist, -rel_x / max(dist, EPS), -rel_y / max(dist, EPS), off,
              far_x / max(far, EPS), far_y / max(far, EPS))
     up = min(speed_up, accel)
+    turn_up = min(turn_up, up)
     around, reach, rho = _paired(trail, age, speed, turn_rate, a, accel, half_base,
-                                 top_speed, up, lag, min(turn_up, up), sight)
+                                 top_speed, up, lag, turn_up, sight)
     claim = off - max(off - reach, dist - around)
-    own, to, ahead_x, ahead_y = _ahead(rel_x, rel_y, heading, speed, turn_rate, age, a,
-                                       accel, half_base, up, lag, min(turn_up, up),
-                                       stop_time, rho, 0.5 * (off - claim))
+    own, to, ahead_x, ahead_y = _ahead(rel_x, rel_y, dist, heading, speed, turn_rate, age,
+                                       a, accel, half_base, up, lag, turn_up, stop_time,
+                                       rho, 0.5 * (off - claim))
     if to > 0.0:
         return -math.inf, to - 2.0 * own, ahead_x, ahead_y, claim
     return -math.inf, claim, east, north, claim
 
 
-def _ahead(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: float,
-           age: float, a: float, accel: float, half_base: float, up: float, lag: float,
-           turn_up: float, stop_time: float, rho: float, free: float
+def _ahead(rel_x: float, rel_y: float, rel: float, heading: float, speed: float,
+           turn_rate: float, age: float, a: float, accel: float, half_base: float,
+           up: float, lag: float, turn_up: float, stop_time: float, rho: float, free: float
            ) -> tuple[float, float, float, float]:
     """(free, dist, east, north): the free distance [m] this robot owns toward a neighbour
     it is behind, by where the neighbour can be and stop (:func:`stop_strip`), with the
     centre (east, north) [m] from its reported position it is measured toward, ``dist``
     [m] from this robot; or (``free``, 0, 0, 0) where that gives no more (arguments as
-    :func:`neighbour_radii`, ``up`` and ``turn_up`` at most ``accel``, ``stop_time`` [s]
-    as :func:`neighbour_hazard`, ``rho`` [m] as :func:`swerve`).
+    :func:`neighbour_radii`, ``rel`` [m] the length of (``rel_x``, ``rel_y``), ``up`` and
+    ``turn_up`` at most ``accel``, ``stop_time`` [s] as :func:`neighbour_hazard`, ``rho``
+    [m] as :func:`swerve`).
 
     The neighbour's stop lies in the strip whenever it last acted, so this robot keeps its
     own stop a from the strip instead of half the gap from the neighbour's claim
@@ -286,7 +288,7 @@ def _ahead(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate: 
     # not behind its braking distance; or its half can be no more than the claim's, half
     # the gap to the segment's far end beyond rho and a
     if (ahead >= v * v / (2.0 * accel)
-            or math.sqrt(rel_x * rel_x + rel_y * rel_y) + v * age - rho - a <= 2.0 * free):
+            or rel + v * age - rho - a <= 2.0 * free):
         return none
     now = _progress(v, turn_rate, age, accel, half_base, up, lag, turn_up)
     along = min(max(ahead, max(now, 0.0)), v * age)   # on the report's segment, by now

@@ -141,19 +141,10 @@ def _drive(v: float, u: float, accel: float, half: float, age: float, plan: list
 
 
 def _stop(state: tuple[float, float, float, float, float], half: float, accel: float,
-          hold: float, dt: float = 1e-3) -> tuple[float, float]:
+          hold: float) -> tuple[float, float]:
     """Where [m] a robot in ``state`` (as :func:`_drive`) comes to rest should its agent
-    die: its drivers hold the wheels for ``hold`` s, then ramp each to rest at accel."""
-    x, y, theta, right, left = state
-    x, y, theta = arc_step(x, y, theta, 0.5 * (right + left) * hold,
-                           (right - left) / (2.0 * half) * hold)
-    while right != 0.0 or left != 0.0:
-        r0, l0 = right, left
-        right = _toward(right, 0.0, accel * dt)
-        left = _toward(left, 0.0, accel * dt)
-        x, y, theta = arc_step(x, y, theta, 0.25 * (r0 + right + l0 + left) * dt,
-                               0.5 * (r0 + right - l0 - left) / (2.0 * half) * dt)
-    return x, y
+    die (:func:`dead_path`)."""
+    return dead_path(state, 2.0 * half, accel, hold, dt=1e-3)[-1]
 
 
 @settings(max_examples=300, deadline=None)
@@ -493,23 +484,32 @@ def test_the_law_goes_round_a_silent_neighbour_as_its_disc_less_a():
     assert silent_radius(0.0, 0.0, 4.0, 50.0, 0.1, 0.5, 0.0) == 2.0   # a/2 floor
 
 
-def dead_robot_path(v, u, base, accel, hold, dt=1e-4):
-    """The batch plant's dead robot (firmware_sim.swarm_step.advance): its drivers hold
-    (v, u) for ``hold`` s, then ramp each wheel to rest at ``accel``. Returns the farthest
-    its centre gets from where it started [m]."""
-    right, left = v + 0.5 * u * base, v - 0.5 * u * base      # the wheels' ground speeds
-    x, y, th, far = 0.0, 0.0, 0.0, 0.0
-    for k in range(64):                                      # held: an arc
-        x, y, th = arc_step(0.0, 0.0, 0.0, v * hold * k / 63, u * hold * k / 63)
-        far = max(far, math.hypot(x, y))
+def dead_path(state: tuple[float, float, float, float, float], base: float, accel: float,
+              hold: float, dt: float = 1e-4) -> list[tuple[float, float]]:
+    """The batch plant's dead robot (firmware_sim.swarm_step.advance) from ``state`` (x, y
+    [m], heading [rad], right and left wheel ground speeds [m/s]): its drivers hold the
+    wheels for ``hold`` s, then ramp each to rest at ``accel``. Its centre's positions [m],
+    the last at rest."""
+    x0, y0, th0, right, left = state
+    v, u = 0.5 * (right + left), (right - left) / base
+    out = [arc_step(x0, y0, th0, v * hold * k / 63, u * hold * k / 63)   # held: an arc
+           for k in range(64)]
+    x, y, th = out[-1]
     while right != 0.0 or left != 0.0:                      # each wheel ramps to rest
         r0, l0 = right, left
-        right -= math.copysign(min(abs(right), accel * dt), right)
-        left -= math.copysign(min(abs(left), accel * dt), left)
+        right = _toward(right, 0.0, accel * dt)
+        left = _toward(left, 0.0, accel * dt)
         vr, vl = 0.5 * (r0 + right), 0.5 * (l0 + left)   # exact unless a wheel stops mid-step
         x, y, th = arc_step(x, y, th, 0.5 * (vr + vl) * dt, (vr - vl) / base * dt)
-        far = max(far, math.hypot(x, y))
-    return far
+        out.append((x, y, th))
+    return [(px, py) for px, py, _ in out]
+
+
+def dead_robot_path(v, u, base, accel, hold, dt=1e-4):
+    """The farthest [m] the centre of a dead robot last commanding (v, u) gets from where it
+    started (:func:`dead_path`)."""
+    state = (0.0, 0.0, 0.0, v + 0.5 * u * base, v - 0.5 * u * base)
+    return max(math.hypot(x, y) for x, y in dead_path(state, base, accel, hold, dt))
 
 
 def test_a_dead_spinning_robot_travels_farther_than_its_reported_speed_says():
