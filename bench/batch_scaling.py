@@ -15,7 +15,8 @@ governor on and off (``[control] governor``), alternating in one process, and th
 the medians (issue 16 asks at most 1.5x). The two runs drive different paths; with
 ``--same-states`` the control step alone is timed instead, with and without the governor
 on the very same states (each period of a run with it, the step without it first, its
-results thrown away). ``--robot`` runs a robot profile instead of the ideal robot;
+results thrown away). ``--robot`` runs a robot profile on the wheels plant instead of the
+ideal robot;
 ``--link-delay`` delays every state exchanged by that many seconds (the robots otherwise
 see each other's current states, and the governor counts no data age).
 """
@@ -36,6 +37,7 @@ from agent.config import ControlParams, RobotParams
 from agent.formation import Formation, FormationKind, formation_offsets
 from firmware_sim import compiled, swarm_step
 from firmware_sim.batch import SimOptions, simulate
+from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles, WorldParams
 from hil.robot_profile import load_robot_profile
 from hil.scenario import load_scenario
@@ -56,27 +58,30 @@ def swarm(n: int, seed: int = 0):
     return poses, form, obstacles
 
 
-def run_once(n: int, steps: int, control: ControlParams, robot: RobotParams,
+def run_once(n: int, steps: int, control: ControlParams, robot: RobotParams | None,
              delay: float = 0.0) -> tuple[float, float]:
-    """(wall seconds per period, share of time in the law) of one run, the robots' states
-    ``delay`` [s] late (0: each sees the others' current ones)."""
+    """(wall seconds per period, share of time in the law) of one run of the ideal robot
+    (``robot`` None) or of ``robot`` on the wheels plant, the robots' states ``delay`` [s]
+    late (0: each sees the others' current ones)."""
     poses, form, obstacles = swarm(n)
     world = WorldParams(link_delay=delay) if delay > 0.0 else None
+    plant = PlantKind.IDEAL if robot is None else PlantKind.WHEELS
     t0 = time.perf_counter()
-    res = simulate(np.arange(n), poses, form, obstacles, control, robot,
-                   SimOptions(duration=steps * control.period, record_every=0),
+    res = simulate(np.arange(n), poses, form, obstacles, control, robot or RobotParams(),
+                   SimOptions(duration=steps * control.period, record_every=0, plant=plant),
                    clock=time.perf_counter, world=world)
     wall = time.perf_counter() - t0
     return wall / (steps + 1), res.law_seconds / wall
 
 
-def time_run(n: int, steps: int, repeats: int, robot: RobotParams) -> tuple[float, float]:
+def time_run(n: int, steps: int, repeats: int, robot: RobotParams | None
+             ) -> tuple[float, float]:
     """(median wall seconds per period, median share of time in the law)."""
     runs = [run_once(n, steps, ControlParams(), robot) for _ in range(repeats)]
     return statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
 
 
-def governor_cost(sizes: list[int], repeats: int, robot: RobotParams,
+def governor_cost(sizes: list[int], repeats: int, robot: RobotParams | None,
                   same_states: bool = False, delay: float = 0.0) -> None:
     """Print, per size, the cost per robot-step with the governor on and off and the ratio
     of the medians: of whole runs, alternating, or (``same_states``) of the control step
@@ -152,7 +157,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.same_states and not args.governor_cost:
         parser.error("--same-states times the governor's cost: give --governor-cost too")
-    robot = load_robot_profile(args.robot) if args.robot else RobotParams()
+    robot = load_robot_profile(args.robot) if args.robot else None
     if args.governor_cost:
         run_once(9, 10, ControlParams(), robot)        # compile before timing
         governor_cost(args.sizes, args.repeats, robot, args.same_states, args.link_delay)
