@@ -44,6 +44,7 @@ SPLITS = 4           # pieces of a neighbour's data age paired with this robot's
 MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nearer the travel
 _STILL = ((0.0,),) * 6      # the trail of a robot that has not moved
 _BLIND = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)       # no line of sight (needed only with a trail)
+_NO_MOTION = (0.0,) * 8     # a split over which the robot did not move (_split_motion)
 
 
 def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: float,
@@ -120,14 +121,17 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
     unit vector toward the segment's far end). Both formulas are written here once, in
     one loop, as the agent runs it for every neighbour every period."""
     around = reach = -math.inf
-    rho = math.inf
+    rho_age = math.inf
     paths, inner = trail[0], trail[1]
     splits = len(paths)
     dist, sx, sy, off, ex, ey = sight
     speed, half_turn = abs(speed), 0.5 * abs(turn_rate)
     half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
     accel_lag2 = accel_lag * lag
-    for k in range(splits):
+    # the last split first: its sums are often the largest, and a share is at most the
+    # path since its split's start, so a split whose sum cannot beat the largest so far
+    # needs no share
+    for k in range(splits - 1, -1, -1):
         if k + 1 < splits and paths[k] == inner[k]:
             continue    # still within it: the next split's end is later, it dominates
         t = max(age * (k + 1) / splits, 0.0)
@@ -135,7 +139,6 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
         # its speed grown by at most up since (or, more loosely, the ramp all along)
         grow = min(top_speed * t, speed * t + min(half_accel * t * t + accel_lag * t,
                                                   half_up * t * t + accel_lag2))
-        around = max(around, a + grow + _own_share(trail, k, sx, sy, sx, sy, dist, grow))
         rho = math.inf
         if half_base > 0.0:
             t2 = t * t
@@ -144,17 +147,45 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
                      + turn_up * t2 * t / (6.0 * half_base))
             rho = min(half_accel * t2 + accel_lag * t + speed * swing,
                       half_up * t2 + accel_lag2 + (speed + accel_lag + up * t) * swing)
-        reach = max(reach, a + rho + _own_share(trail, k, sx, sy, ex, ey, off, rho))
-    return around, reach, rho
+        if k == splits - 1:
+            rho_age = rho
+        bound = a + paths[k]
+        if bound + grow <= around and bound + rho <= reach:
+            continue
+        motion = _split_motion(trail, k) if paths[k] > 0.0 else _NO_MOTION
+        if bound + grow > around:
+            around = max(around, a + grow + _own_share(motion, sx, sy, sx, sy, dist, grow))
+        if bound + rho > reach:
+            reach = max(reach, a + rho + _own_share(motion, sx, sy, ex, ey, off, rho))
+    return around, reach, rho_age
 
 
-def _own_share(trail: FloatRows, k: int, sx: float, sy: float, ex: float,
-               ey: float, dist: float, radius: float) -> float:
+def _split_motion(trail: FloatRows, k: int
+                  ) -> tuple[float, float, float, float, float, float, float, float]:
+    """This robot's motion over split ``k`` of ``trail`` (as :func:`neighbour_radii`), as
+    :func:`_own_share` takes it: (path [m] since the split's start; displacement east and
+    north [m] since its start and its length; the same since its end; half the minor axis
+    [m] of the ellipse of the positions it can have had within the split). Computed once
+    for the two shares of a split."""
+    path = trail[0][k]
+    start_x, start_y, end_x, end_y = trail[2][k], trail[3][k], trail[4][k], trail[5][k]
+    within = path - trail[1][k]            # m, walked within the split
+    chord_x, chord_y = start_x - end_x, start_y - end_y
+    bulge = 0.5 * math.sqrt(max(within * within - chord_x * chord_x - chord_y * chord_y,
+                                0.0))
+    return (path, start_x, start_y, math.sqrt(start_x * start_x + start_y * start_y),
+            end_x, end_y, math.sqrt(end_x * end_x + end_y * end_y), bulge)
+
+
+def _own_share(motion: tuple[float, float, float, float, float, float, float, float],
+               sx: float, sy: float, ex: float, ey: float, dist: float, radius: float
+               ) -> float:
     """How much [m] of the gap to a neighbour this robot's own motion takes from its half,
-    the neighbour having last acted within split ``k`` of its data's age, at a point
+    the neighbour having last acted within a split of its data's age over which this
+    robot moved by ``motion`` (:func:`_split_motion`), at a point
     within ``radius`` [m] of a set this robot sees at ``dist`` [m] (its distance to the
     set's nearest point) and between the unit directions (``sx``, ``sy``) and (``ex``,
-    ``ey``) (the shorter arc). ``trail`` as :func:`neighbour_radii`.
+    ``ey``) (the shorter arc).
 
     The neighbour then at q, this robot at p0, kept its stop within half of |q - p0|
     beyond a; this robot, now at p with D = p - p0, must keep its stop within
@@ -165,30 +196,24 @@ def _own_share(trail: FloatRows, k: int, sx: float, sy: float, ex: float,
     length l between where it was at the split's start and end, so within the ellipse
     of those foci and l: x.D is at most the larger of x.D at the two ends plus the
     ellipse's half minor axis, and x is within the arc widened by asin(radius / dist)."""
-    path = trail[0][k]
+    path, start_x, start_y, start, end_x, end_y, end, bulge = motion
     if path <= 0.0:
         return 0.0
     clear = dist - radius                  # m, the least r
     if clear <= EPS:
         return path
-    start_x, start_y, end_x, end_y = trail[2][k], trail[3][k], trail[4][k], trail[5][k]
     sin_b = min(radius / dist, 1.0)        # the set's points lie within asin(sin_b)
-    widen = (math.sqrt(1.0 - sin_b * sin_b), sin_b, False)
-    toward = max(_toward(start_x, start_y, sx, sy, ex, ey, widen),
-                 _toward(end_x, end_y, sx, sy, ex, ey, widen))
-    within = path - trail[1][k]            # m, walked within the split
-    chord_x, chord_y = start_x - end_x, start_y - end_y
-    bulge = 0.5 * math.sqrt(max(within * within - chord_x * chord_x - chord_y * chord_y,
-                                0.0))
+    cos_b = math.sqrt(1.0 - sin_b * sin_b)
+    toward = max(_toward(start_x, start_y, start, sx, sy, ex, ey, cos_b, sin_b),
+                 _toward(end_x, end_y, end, sx, sy, ex, ey, cos_b, sin_b))
     return min(path, max(0.0, toward + bulge + 0.5 * path * path / clear))
 
 
-def _toward(dx: float, dy: float, sx: float, sy: float, ex: float, ey: float,
-            widen: tuple[float, float, bool]) -> float:
-    """The largest component [m] of (``dx``, ``dy``) [m] along a direction within an
-    angle ``widen`` (its cosine, sine, and False, as :func:`_cosine`'s pad) of the shorter
+def _toward(dx: float, dy: float, size: float, sx: float, sy: float, ex: float,
+            ey: float, cos_b: float, sin_b: float) -> float:
+    """The largest component [m] of (``dx``, ``dy``) [m] (of length ``size``) along a
+    direction within an angle b (its cosine ``cos_b`` and sine ``sin_b``) of the shorter
     arc from unit (``sx``, ``sy``) to unit (``ex``, ``ey``)."""
-    size = math.sqrt(dx * dx + dy * dy)
     if size <= 0.0:
         return 0.0
     arc = sx * ey - sy * ex
@@ -197,7 +222,9 @@ def _toward(dx: float, dy: float, sx: float, sy: float, ex: float, ey: float,
         return size                        # it points into the arc
     # g, the angle to the arc's nearer end: the cosine of what is beyond the widening
     cos_g = min(max(max(dx * sx + dy * sy, dx * ex + dy * ey) / size, -1.0), 1.0)
-    return size * _cosine(cos_g, math.sqrt(1.0 - cos_g * cos_g), widen)
+    if cos_g >= cos_b:
+        return size                        # within the widening
+    return size * (cos_g * cos_b + math.sqrt(1.0 - cos_g * cos_g) * sin_b)
 
 
 def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
@@ -239,7 +266,8 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
                                       trail[0][0], a, accel, top_speed, staleness,
                                       stop_time, wheel_top, nearer, speed_up, lag, turn_up)
         return full, half, 0.0, 0.0, half
-    east, north, off, seg_x, seg_y = _nearest_on_report(rel_x, rel_y, heading, speed, age)
+    hx, hy = math.cos(heading), math.sin(heading)
+    east, north, off, seg_x, seg_y = _nearest_on_report(rel_x, rel_y, hx, hy, speed, age)
     dist = math.sqrt(rel_x * rel_x + rel_y * rel_y)
     # unit vectors from this robot toward the report's position and its segment's far end
     far_x, far_y = seg_x - rel_x, seg_y - rel_y
@@ -251,7 +279,7 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     around, reach, rho = _paired(trail, age, speed, turn_rate, a, accel, half_base,
                                  top_speed, up, lag, turn_up, sight)
     claim = off - max(off - reach, dist - around)
-    own, to, ahead_x, ahead_y = _ahead(rel_x, rel_y, dist, heading, speed, turn_rate, age,
+    own, to, ahead_x, ahead_y = _ahead(rel_x, rel_y, dist, hx, hy, speed, turn_rate, age,
                                        a, accel, half_base, up, lag, turn_up, stop_time,
                                        rho, 0.5 * (off - claim))
     if to > 0.0:
@@ -259,7 +287,7 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     return -math.inf, claim, east, north, claim
 
 
-def _ahead(rel_x: float, rel_y: float, rel: float, heading: float, speed: float,
+def _ahead(rel_x: float, rel_y: float, rel: float, hx: float, hy: float, speed: float,
            turn_rate: float, age: float, a: float, accel: float, half_base: float,
            up: float, lag: float, turn_up: float, stop_time: float, rho: float, free: float
            ) -> tuple[float, float, float, float]:
@@ -267,7 +295,8 @@ def _ahead(rel_x: float, rel_y: float, rel: float, heading: float, speed: float,
     it is behind, by where the neighbour can be and stop (:func:`stop_strip`), with the
     centre (east, north) [m] from its reported position it is measured toward, ``dist``
     [m] from this robot; or (``free``, 0, 0, 0) where that gives no more (arguments as
-    :func:`neighbour_radii`, ``rel`` [m] the length of (``rel_x``, ``rel_y``), ``up`` and
+    :func:`neighbour_radii`, ``rel`` [m] the length of (``rel_x``, ``rel_y``), (``hx``,
+    ``hy``) the unit vector along its reported heading, ``up`` and
     ``turn_up`` at most ``accel``, ``stop_time`` [s] as :func:`neighbour_hazard`, ``rho``
     [m] as :func:`swerve`).
 
@@ -281,7 +310,6 @@ def _ahead(rel_x: float, rel_y: float, rel: float, heading: float, speed: float,
     none = (free, 0.0, 0.0, 0.0)
     if v <= 0.0 or half_base <= 0.0:
         return none
-    hx, hy = math.cos(heading), math.sin(heading)
     if speed < 0.0:
         hx, hy = -hx, -hy
     ahead = rel_x * hx + rel_y * hy             # m, this robot along the report
@@ -380,13 +408,13 @@ def _strip(now: float, speed: float, turn_rate: float, age: float, accel: float,
     return lo, across
 
 
-def _nearest_on_report(rel_x: float, rel_y: float, heading: float, speed: float,
+def _nearest_on_report(rel_x: float, rel_y: float, hx: float, hy: float, speed: float,
                        age: float) -> tuple[float, float, float, float, float]:
     """(east, north, off, seg_x, seg_y): the point [m] from a neighbour's reported
     position, on the segment (seg_x, seg_y) [m] its report extrapolates along over ``age``
-    [s] (``speed`` [m/s] along ``heading`` [rad]), nearest the point (``rel_x``,
-    ``rel_y``) [m], and its distance [m] from that point."""
-    ex, ey = speed * age * math.cos(heading), speed * age * math.sin(heading)
+    [s] (``speed`` [m/s] along the unit vector (``hx``, ``hy``) of its heading), nearest
+    the point (``rel_x``, ``rel_y``) [m], and its distance [m] from that point."""
+    ex, ey = speed * age * hx, speed * age * hy
     length2 = ex * ex + ey * ey
     t = 0.0 if length2 <= 0.0 else min(max((rel_x * ex + rel_y * ey) / length2, 0.0), 1.0)
     ox, oy = rel_x - t * ex, rel_y - t * ey      # products, not ** (pow rounds otherwise)
@@ -419,7 +447,8 @@ def approach(rel_x: float, rel_y: float, heading: float, speed: float, turn_rate
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
     age = max(age, 0.0)
-    off = _nearest_on_report(rel_x, rel_y, heading, speed, age)[2]
+    off = _nearest_on_report(rel_x, rel_y, math.cos(heading), math.sin(heading), speed,
+                             age)[2]
     rho = swerve(speed, turn_rate, age, accel, half_base, speed_up, lag, turn_up)
     return math.sqrt(rel_x * rel_x + rel_y * rel_y) - off + rho
 

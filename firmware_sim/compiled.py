@@ -7,9 +7,13 @@ function of those modules is replaced by its compiled version, and compiles them
 by hand and nothing is written twice: the compiled and the interpreted runs execute the same
 source, and ``tests/test_compiled.py`` checks that they give equal results.
 
+The functions of :data:`INLINED` are inlined into their callers (numba's ``inline``, at its
+own IR level): the safety governor's helpers run per neighbour, and a call between two
+compiled functions is otherwise a real call that the optimiser cannot see through.
+
 numba caches the machine code, but it does not notice that a function it compiled calls a
 function of another file that has changed since. So the cache lives in a folder named
-after a hash of all the sources (``$BOUNDSWARM_NUMBA_CACHE``, else
+after a hash of all the sources and of this module (``$BOUNDSWARM_NUMBA_CACHE``, else
 ``~/.cache/boundswarm/numba``): an edited law is compiled afresh, never taken stale.
 
 numba is an optional dependency (the ``sim`` extra); agents never import this module.
@@ -30,6 +34,10 @@ log = logging.getLogger(__name__)
 SOURCES = ("common.draws", "agent.kinematics", "agent.avoidance", "agent.law", "agent.formation",
            "agent.governor", "agent.neighbours", "agent.odometry", "firmware_sim.world_step",
            "firmware_sim.swarm_step")
+# modules whose functions are compiled into their callers: numba does not inline a call
+# from one compiled function to another otherwise, and the governor's small helpers run
+# for every neighbour of every robot every period
+INLINED = ("agent.governor",)
 
 
 def available() -> bool:
@@ -52,6 +60,7 @@ def use_threads(parallel: bool) -> None:
 def cache_dir(modules: list[types.ModuleType], numba_version: str) -> Path:
     """The folder of the machine code compiled from ``modules``' current sources."""
     digest = hashlib.sha256(numba_version.encode())
+    digest.update(Path(__file__).read_bytes())      # how they are compiled
     for m in modules:
         digest.update(Path(m.__file__ or "").read_bytes())
     root = os.environ.get("BOUNDSWARM_NUMBA_CACHE")
@@ -89,7 +98,9 @@ def _compile(modules: list[types.ModuleType], numba: Any) -> types.SimpleNamespa
                 copy = types.FunctionType(code, namespaces[m.__name__], name,
                                           obj.__defaults__, obj.__closure__)
                 originals[obj] = numba.njit(copy, cache=True,
-                                            parallel="prange" in code.co_names)
+                                            parallel="prange" in code.co_names,
+                                            inline="always" if m.__name__ in INLINED
+                                            else "never")
     for ns in namespaces.values():
         for name, obj in list(ns.items()):
             if isinstance(obj, types.FunctionType) and obj in originals:

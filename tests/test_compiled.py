@@ -102,3 +102,13 @@ def test_the_cache_follows_every_source(tmp_path, monkeypatch):
     files[0].write_text("x = 2\n")
     assert compiled.cache_dir(modules, "0.60") != first
     assert compiled.cache_dir(modules, "0.61") != compiled.cache_dir(modules, "0.60")
+
+
+def test_the_governor_s_helpers_are_compiled_into_their_callers():
+    """numba makes a real call from one compiled function to another unless told to
+    inline it; the governor's helpers run per neighbour per robot, so they are inlined
+    (and the machine code is cached apart from code compiled otherwise)."""
+    k = compiled.kernels()
+    assert k._paired.targetoptions["inline"] == "always"
+    assert k._own_share.targetoptions["inline"] == "always"
+    assert k.law_step.targetoptions["inline"] == "never"

@@ -12,6 +12,7 @@ from agent.governor import (
     SPLITS,
     _own_share,
     _paired,
+    _split_motion,
     approach,
     braking_speed,
     neighbour_hazard,
@@ -100,8 +101,9 @@ def test_this_robot_s_share_of_its_own_motion_keeps_two_stops_apart(pts, moves, 
     off = _segment_distance(p, s, e)
     units = [((pt[0] - p[0]) / max(dist(pt, p), 1e-12), (pt[1] - p[1]) / max(dist(pt, p), 1e-12))
              for pt in (s, e)]
-    share = _own_share(([path], [path - within], [p[0] - start[0]], [p[1] - start[1]],
-                        [p[0] - w[0]], [p[1] - w[1]]), 0, *units[0], *units[1], off, g)
+    motion = _split_motion(([path], [path - within], [p[0] - start[0]], [p[1] - start[1]],
+                            [p[0] - w[0]], [p[1] - w[1]]), 0)
+    share = _own_share(motion, *units[0], *units[1], off, g)
     assert 0.0 <= share <= path
     own = 0.5 * (off - A - g - share)
     theirs = 0.5 * (dist(q, p0) - A)
