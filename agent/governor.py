@@ -149,13 +149,14 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
                       half_up * t2 + accel_lag2 + (speed + accel_lag + up * t) * swing)
         if k == splits - 1:
             rho_age = rho
-        bound = a + paths[k]
-        if bound + grow <= around and bound + rho <= reach:
+        # each bound summed as its term is, so that it rounds no lower
+        path = paths[k]
+        if a + grow + path <= around and a + rho + path <= reach:
             continue
-        motion = _split_motion(trail, k) if paths[k] > 0.0 else _NO_MOTION
-        if bound + grow > around:
+        motion = _split_motion(trail, k) if path > 0.0 else _NO_MOTION
+        if a + grow + path > around:
             around = max(around, a + grow + _own_share(motion, sx, sy, sx, sy, dist, grow))
-        if bound + rho > reach:
+        if a + rho + path > reach:
             reach = max(reach, a + rho + _own_share(motion, sx, sy, ex, ey, off, rho))
     return around, reach, rho_age
 
@@ -182,10 +183,9 @@ def _own_share(motion: tuple[float, float, float, float, float, float, float, fl
                ) -> float:
     """How much [m] of the gap to a neighbour this robot's own motion takes from its half,
     the neighbour having last acted within a split of its data's age over which this
-    robot moved by ``motion`` (:func:`_split_motion`), at a point
-    within ``radius`` [m] of a set this robot sees at ``dist`` [m] (its distance to the
-    set's nearest point) and between the unit directions (``sx``, ``sy``) and (``ex``,
-    ``ey``) (the shorter arc).
+    robot moved by ``motion`` (:func:`_split_motion`), at a point within ``radius`` [m] of
+    a set this robot sees at ``dist`` [m] (its distance to the set's nearest point) and
+    between the unit directions (``sx``, ``sy``) and (``ex``, ``ey``) (the shorter arc).
 
     The neighbour then at q, this robot at p0, kept its stop within half of |q - p0|
     beyond a; this robot, now at p with D = p - p0, must keep its stop within
@@ -220,7 +220,8 @@ def _toward(dx: float, dy: float, size: float, sx: float, sy: float, ex: float,
     if (arc != 0.0 and arc * (sx * dy - sy * dx) >= 0.0 and arc * (dx * ey - dy * ex) >= 0.0
             and dx * (sx + ex) + dy * (sy + ey) > 0.0):
         return size                        # it points into the arc
-    # g, the angle to the arc's nearer end: the cosine of what is beyond the widening
+    # g, the angle to the arc's nearer end; beyond the widening b the component is
+    # size cos(g - b)
     cos_g = min(max(max(dx * sx + dy * sy, dx * ex + dy * ey) / size, -1.0), 1.0)
     if cos_g >= cos_b:
         return size                        # within the widening
@@ -296,9 +297,9 @@ def _ahead(rel_x: float, rel_y: float, rel: float, hx: float, hy: float, speed: 
     centre (east, north) [m] from its reported position it is measured toward, ``dist``
     [m] from this robot; or (``free``, 0, 0, 0) where that gives no more (arguments as
     :func:`neighbour_radii`, ``rel`` [m] the length of (``rel_x``, ``rel_y``), (``hx``,
-    ``hy``) the unit vector along its reported heading, ``up`` and
-    ``turn_up`` at most ``accel``, ``stop_time`` [s] as :func:`neighbour_hazard`, ``rho``
-    [m] as :func:`swerve`).
+    ``hy``) the unit vector along its reported heading, ``up`` and ``turn_up`` at most
+    ``accel``, ``stop_time`` [s] as :func:`neighbour_hazard`, ``rho`` [m] as
+    :func:`swerve`).
 
     The neighbour's stop lies in the strip whenever it last acted, so this robot keeps its
     own stop a from the strip instead of half the gap from the neighbour's claim

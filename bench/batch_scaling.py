@@ -16,9 +16,8 @@ the medians (issue 16 asks at most 1.5x). The two runs drive different paths; wi
 ``--same-states`` the control step alone is timed instead, with and without the governor
 on the very same states (each period of a run with it, the step without it first, its
 results thrown away). ``--robot`` runs a robot profile on the wheels plant instead of the
-ideal robot;
-``--link-delay`` delays every state exchanged by that many seconds (the robots otherwise
-see each other's current states, and the governor counts no data age).
+ideal robot; ``--link-delay`` delays every state exchanged by that many seconds (the
+robots otherwise see each other's current states, and the governor counts no data age).
 """
 from __future__ import annotations
 
@@ -66,8 +65,9 @@ def run_once(n: int, steps: int, control: ControlParams, robot: RobotParams | No
     poses, form, obstacles = swarm(n)
     world = WorldParams(link_delay=delay) if delay > 0.0 else None
     plant = PlantKind.IDEAL if robot is None else PlantKind.WHEELS
+    params = robot if robot is not None else RobotParams()
     t0 = time.perf_counter()
-    res = simulate(np.arange(n), poses, form, obstacles, control, robot or RobotParams(),
+    res = simulate(np.arange(n), poses, form, obstacles, control, params,
                    SimOptions(duration=steps * control.period, record_every=0, plant=plant),
                    clock=time.perf_counter, world=world)
     wall = time.perf_counter() - t0

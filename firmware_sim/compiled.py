@@ -8,8 +8,8 @@ by hand and nothing is written twice: the compiled and the interpreted runs exec
 source, and ``tests/test_compiled.py`` checks that they give equal results.
 
 The functions of :data:`INLINED` are inlined into their callers (numba's ``inline``, at its
-own IR level): the safety governor's helpers run per neighbour, and a call between two
-compiled functions is otherwise a real call that the optimiser cannot see through.
+own IR level): the safety governor's helpers run per neighbour, and the calls between
+them, left to LLVM, stayed real calls (docs/performance.md).
 
 numba caches the machine code, but it does not notice that a function it compiled calls a
 function of another file that has changed since. So the cache lives in a folder named
@@ -34,9 +34,9 @@ log = logging.getLogger(__name__)
 SOURCES = ("common.draws", "agent.kinematics", "agent.avoidance", "agent.law", "agent.formation",
            "agent.governor", "agent.neighbours", "agent.odometry", "firmware_sim.world_step",
            "firmware_sim.swarm_step")
-# modules whose functions are compiled into their callers: numba does not inline a call
-# from one compiled function to another otherwise, and the governor's small helpers run
-# for every neighbour of every robot every period
+# modules whose functions are compiled into their callers: the governor's small helpers
+# run for every neighbour of every robot every period, and left to LLVM their calls to
+# each other stayed real calls
 INLINED = ("agent.governor",)
 
 
@@ -58,7 +58,8 @@ def use_threads(parallel: bool) -> None:
 
 
 def cache_dir(modules: list[types.ModuleType], numba_version: str) -> Path:
-    """The folder of the machine code compiled from ``modules``' current sources."""
+    """The folder of the machine code compiled from ``modules``' current sources, as
+    this module compiles them."""
     digest = hashlib.sha256(numba_version.encode())
     digest.update(Path(__file__).read_bytes())      # how they are compiled
     for m in modules:

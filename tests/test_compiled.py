@@ -102,12 +102,16 @@ def test_the_cache_follows_every_source(tmp_path, monkeypatch):
     files[0].write_text("x = 2\n")
     assert compiled.cache_dir(modules, "0.60") != first
     assert compiled.cache_dir(modules, "0.61") != compiled.cache_dir(modules, "0.60")
+    second = compiled.cache_dir(modules, "0.60")
+    options = tmp_path / "compiled.py"          # how they are compiled (inlining)
+    options.write_text("INLINED = ()\n")
+    monkeypatch.setattr(compiled, "__file__", str(options))
+    assert compiled.cache_dir(modules, "0.60") != second
 
 
 def test_the_governor_s_helpers_are_compiled_into_their_callers():
-    """numba makes a real call from one compiled function to another unless told to
-    inline it; the governor's helpers run per neighbour per robot, so they are inlined
-    (and the machine code is cached apart from code compiled otherwise)."""
+    """The governor's helpers run per neighbour per robot: they are inlined into their
+    callers, the law's own functions are not (docs/performance.md)."""
     k = compiled.kernels()
     assert k._paired.targetoptions["inline"] == "always"
     assert k._own_share.targetoptions["inline"] == "always"

@@ -605,8 +605,9 @@ def test_a_hazard_counts_with_the_cosine_of_its_angle_beyond_the_heading(bearing
 def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path, up):
     """The discs are the largest over the splits of the age, each split's reach to its end
     paired with this robot's path from its start: the same, bit for bit, as pairing each
-    split alone (the splits a later one dominates, with the same path, are skipped); rho
-    is the last split's, the whole age's."""
+    split alone (the splits a later one dominates, with the same path, are skipped, and so
+    are the shares of a split whose sum cannot beat the largest so far); rho is the last
+    split's, the whole age's."""
     paths = [sum(path[k:]) for k in range(SPLITS)]     # the path since each split's start
     trail = (paths, paths[1:] + [0.0], paths, [0.0] * SPLITS, paths[1:] + [0.0],
              [0.0] * SPLITS)                                   # straight along x
@@ -615,6 +616,22 @@ def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path
     alone = [_paired([[row[k]] for row in trail], age * (k + 1) / SPLITS, speed, turn_rate,
                      A, ACCEL, 0.4, TOP, up, 0.04, up, sight) for k in range(SPLITS)]
     assert got == (max(r[0] for r in alone), max(r[1] for r in alone), alone[-1][2])
+
+
+def test_a_split_is_skipped_only_where_its_sum_cannot_round_above_the_largest():
+    """A split's shares are skipped when a + its travel + its path cannot beat the largest
+    sum so far; that bound is summed as the term it stands for. Summed the other way round
+    it came out an ulp lower than this split's term, whose share is its whole path (this
+    robot 5 cm from the report), and the disc lost that ulp."""
+    p0, p3 = 0.7054340045891819, 0.10543400458918173
+    paths, inner = [p0, p3, p3, p3], [p3, p3, p3, 0.0]
+    trail = (paths, inner, paths, [0.0] * SPLITS, inner, [0.0] * SPLITS)
+    sight = (0.05, -1.0, 0.0, 0.0, 1.0, 0.0)       # 5 cm behind the report, on its segment
+    args = (1.5, 5.0, 0.5, 2.0, 0.4, 3.0, 2.0, 0.04, 2.0, sight)
+    got = _paired(trail, 0.4, *args)
+    alone = [_paired(tuple([row[k]] for row in trail), 0.4 * (k + 1) / SPLITS, *args)
+             for k in range(SPLITS)]
+    assert got[:2] == (max(r[0] for r in alone), max(r[1] for r in alone))
 
 
 def test_a_static_hazard_abeam_does_not_limit_but_a_moving_one_does():
