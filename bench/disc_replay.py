@@ -1,0 +1,102 @@
+"""The compiled cost of one neighbour's governor disc, on discs recorded in a real swarm.
+
+    .venv/bin/python bench/disc_replay.py [--robots 300] [--periods 150]
+                                          [--robot robots/cart.toml] [--link-delay 0.2]
+
+Runs the world of ``bench/batch_scaling.py`` (a grid at 5 m spacing through obstacles, the
+profile on the wheels plant, every state ``--link-delay`` late) interpreted for
+``--periods`` periods, recording the arguments of every call of
+``agent.governor.neighbour_radii``, then times the compiled function over the recorded
+calls, in their order (best of 7 passes), and once more with each recorded disc repeated
+a thousand times in a row (where branches are always predicted). The figure is what a
+disc costs where the batch simulator spends it, unlike a disc of made-up arguments.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+from batch_scaling import swarm
+
+from agent.config import ControlParams
+from firmware_sim import compiled, swarm_step
+from firmware_sim.batch import SimOptions, simulate
+from firmware_sim.plant import PlantKind
+from firmware_sim.world import WorldParams
+from hil.robot_profile import load_robot_profile
+
+
+def record(robots: int, periods: int, robot_file: str, delay: float
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """(arguments (C, 16) but the trail, trails (C, 6, splits)) of every disc built."""
+    rows: list[list[float]] = []
+    trails: list[np.ndarray] = []
+    built = swarm_step.neighbour_radii
+
+    def recorded(*args):
+        rows.append([float(v) for v in args[:6] + args[7:]])
+        trails.append(np.array(args[6], dtype=float))
+        return built(*args)
+
+    poses, form, obstacles = swarm(robots)
+    control = ControlParams(governor=True)
+    swarm_step.neighbour_radii = recorded
+    try:
+        simulate(np.arange(robots), poses, form, obstacles, control,
+                 load_robot_profile(robot_file),
+                 SimOptions(duration=periods * control.period, record_every=0,
+                            compiled=False, plant=PlantKind.WHEELS),
+                 world=WorldParams(link_delay=delay) if delay > 0.0 else None)
+    finally:
+        swarm_step.neighbour_radii = built
+    if not rows:
+        raise SystemExit("no disc was built: give more robots or periods")
+    return np.array(rows), np.array(trails)
+
+
+def best_ns(loop, rows: np.ndarray, trails: np.ndarray) -> float:
+    """The best of 7 passes of ``loop`` over the calls [ns per call]."""
+    loop(rows[:2], trails[:2])                   # compile
+    best = math.inf
+    for _ in range(7):
+        t0 = time.perf_counter()
+        loop(rows, trails)
+        best = min(best, time.perf_counter() - t0)
+    return best / len(rows) * 1e9
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--robots", type=int, default=300)
+    ap.add_argument("--periods", type=int, default=150)
+    ap.add_argument("--robot", default="robots/cart.toml", metavar="FILE")
+    ap.add_argument("--link-delay", type=float, default=0.2, metavar="S")
+    args = ap.parse_args()
+    import numba
+
+    t0 = time.perf_counter()
+    rows, trails = record(args.robots, args.periods, args.robot, args.link_delay)
+    print(f"recorded {len(rows)} discs in {time.perf_counter() - t0:.0f} s "
+          f"(median data age {np.median(rows[:, 5]) * 1e3:.0f} ms)", flush=True)
+    disc = compiled.kernels().neighbour_radii
+
+    @numba.njit
+    def loop(rows, trails):
+        total = 0.0
+        for i in range(len(rows)):
+            r = rows[i]
+            out = disc(r[0], r[1], r[2], r[3], r[4], r[5], trails[i], r[6], r[7], r[8],
+                       r[9], r[10], r[11], r[12], r[13], r[14], r[15])
+            total += out[1] + out[2] + out[3] + out[4]
+        return total
+
+    print(f"compiled neighbour_radii: {best_ns(loop, rows, trails):.0f} ns per disc")
+    again = np.repeat(np.arange(0, len(rows), 1000), 1000)
+    print(f"each disc a thousand times in a row: "
+          f"{best_ns(loop, rows[again], trails[again]):.0f} ns per disc")
+
+
+if __name__ == "__main__":
+    main()
