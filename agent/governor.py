@@ -132,8 +132,9 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
     # path since its split's start, so a split whose sum cannot beat the largest so far
     # needs no share
     for k in range(splits - 1, -1, -1):
-        if k + 1 < splits and paths[k] == inner[k]:
-            continue    # still within it: the next split's end is later, it dominates
+        if k + 1 < splits and (paths[k] == inner[k] or _same_motion(trail, k)):
+            continue    # still within it, or moved as over the next split, whose end is
+            #             later: the next split dominates
         t = max(age * (k + 1) / splits, 0.0)
         # travel: its wheels within a ramp of the command it reported for the lag, then
         # its speed grown by at most up since (or, more loosely, the ramp all along)
@@ -159,6 +160,17 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
         if a + rho + path > reach:
             reach = max(reach, a + rho + _own_share(motion, sx, sy, ex, ey, off, rho))
     return around, reach, rho_age
+
+
+def _same_motion(trail: FloatRows, k: int) -> bool:
+    """Whether this robot's motion over split ``k`` of ``trail`` (as
+    :func:`neighbour_radii`) is that over split k + 1: the same positions at and after
+    their starts and ends, as where both fall between two recorded positions (data younger
+    than the robot's period)."""
+    for row in range(6):
+        if trail[row][k] != trail[row][k + 1]:
+            return False
+    return True
 
 
 def _split_motion(trail: FloatRows, k: int

@@ -618,6 +618,25 @@ def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path
     assert got == (max(r[0] for r in alone), max(r[1] for r in alone), alone[-1][2])
 
 
+@settings(max_examples=200, deadline=None)
+@given(speed=st.floats(0.0, 3.0), turn_rate=st.floats(-2.0, 2.0), age=st.floats(0.0, 0.02),
+       moved=st.floats(0.0, 0.06), angle=st.floats(-math.pi, math.pi),
+       up=st.floats(0.2, 2.0))
+def test_data_younger_than_a_period_pairs_one_motion(speed, turn_rate, age, moved, angle,
+                                                     up):
+    """Data younger than the robot's period: every split of its age starts after the last
+    recorded position and ends at the newest, so the robot moved as much over each; the
+    last split, with the latest end, gives the discs, bit for bit as pairing each alone."""
+    east, north = moved * math.cos(angle), moved * math.sin(angle)
+    trail = ([moved] * SPLITS, [0.0] * SPLITS, [east] * SPLITS, [north] * SPLITS,
+             [0.0] * SPLITS, [0.0] * SPLITS)
+    sight = (3.0, 0.6, 0.8, 2.9, 0.8, 0.6)
+    got = _paired(trail, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04, up, sight)
+    alone = [_paired([[row[k]] for row in trail], age * (k + 1) / SPLITS, speed, turn_rate,
+                     A, ACCEL, 0.4, TOP, up, 0.04, up, sight) for k in range(SPLITS)]
+    assert got == (max(r[0] for r in alone), max(r[1] for r in alone), alone[-1][2])
+
+
 def test_a_split_is_skipped_only_where_its_sum_cannot_round_above_the_largest():
     """A split's shares are skipped when a + its travel + its path cannot beat the largest
     sum so far; that bound is summed as the term it stands for. Summed the other way round
