@@ -10,9 +10,12 @@ With ``--governor-cost`` a second agent, the same but with the safety governor o
 (``[control] governor = false``), ticks among the same neighbours in alternation, so both
 see the same machine; the differences of the medians and of the 99th percentiles are what
 the governor adds to a tick. ``--robot`` takes a robot profile (default: the SITL's
-defaults).
+defaults). ``--data-age`` stamps the neighbours' states that many seconds before the tick
+(default 0: stamped at the tick, where the governor has no data age to count and its
+discs take their quickest path; on a network they are some milliseconds old).
 
     .venv/bin/python bench/agent_tick.py [--ticks 3000] [--governor-cost] [--robot FILE]
+                                         [--data-age S]
 """
 from __future__ import annotations
 
@@ -51,12 +54,13 @@ def make_agent(clock: SimClock, net: SharedSwarm, governor: bool,
 
 
 def timed_tick(agent: Agent, others: list, angles: np.ndarray, k: int,
-               clock: SimClock) -> int:
-    """Publish the neighbours round ``agent``, tick it; the tick's wall time [ns]."""
+               clock: SimClock, age: float) -> int:
+    """Publish the neighbours round ``agent``, their states stamped ``age`` [s] ago, tick
+    it; the tick's wall time [ns]."""
     x, y = agent.odometry.pose[:2]
     for n, (port, a) in enumerate(zip(others, angles)):
         r = 3.0 + 0.2 * n
-        port.publish(StateMsg(n + 2, k + 1, clock.wall(), x + r * math.cos(a),
+        port.publish(StateMsg(n + 2, k + 1, clock.wall() - age, x + r * math.cos(a),
                               y + r * math.sin(a), a, 1.0, 0.1, 0.0, 0.0, 0,
                               StateFlags.ARMED))
     t0 = time.perf_counter_ns()
@@ -70,7 +74,11 @@ def main() -> None:
     ap.add_argument("--governor-cost", action="store_true",
                     help="also tick an agent with the governor off, in alternation")
     ap.add_argument("--robot", metavar="FILE", help="robot profile (robots/*.toml)")
+    ap.add_argument("--data-age", type=float, default=0.0, metavar="S",
+                    help="the neighbours' states this old when the agent ticks [s]")
     args = ap.parse_args()
+    if not 0.0 <= args.data_age < 0.5:
+        ap.error("--data-age: from 0 up to the staleness limit, 0.5 s")
     robot = RobotParams()
     if args.robot:
         from hil.robot_profile import load_robot_profile
@@ -94,7 +102,8 @@ def main() -> None:
     for k in range(args.ticks):
         order.reverse()                  # neither agent always ticks first
         for name in order:
-            times[name].append(timed_tick(agents[name], others, angles, k, clock))
+            times[name].append(timed_tick(agents[name], others, angles, k, clock,
+                                          args.data_age))
         clock.now += 0.02
     stats = {}
     for name, t in times.items():
