@@ -196,16 +196,15 @@ def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: fl
     And the disc (agent.governor.neighbour_radii: the radius of the gap's shared half) of a
     neighbour abeam that, like this robot, drives straight on at ``pace`` [m/s]."""
     from agent.governor import SPLITS, braking_speed, neighbour_radii
+    from agent.trail import straight
     top = min(control.v_max, robot.v_wheel_max)
     free = 0.5 * (sensing_range - control.a) - top * data_age
     head_on = braking_speed(free, robot.a_max, control.period + robot.drive_latency)
     # this robot's motion over each split of the age, straight north at the pace; the
     # neighbour's report, data_age old, puts it that much behind
-    paths = [pace * data_age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
-    inner = [pace * data_age * (SPLITS - k - 1) / SPLITS for k in range(SPLITS)]
-    trail = (paths, inner, [0.0] * SPLITS, paths, [0.0] * SPLITS, inner)
+    trail = straight(pace, 0.0, 1.0, data_age, SPLITS)
     half_base, disc = disc_args(control, robot, math.inf)
-    beside = neighbour_radii(-sensing_range, paths[0], 0.5 * math.pi, pace, 0.0, data_age,
+    beside = neighbour_radii(-sensing_range, trail[0][0], 0.5 * math.pi, pace, 0.0, data_age,
                              trail, disc[0], disc[1], half_base, *disc[2:],
                              *commitment(control, robot))[1]
     return SpeedEnvelope(top, head_on, sensing_range, data_age, pace, beside)

@@ -13,6 +13,16 @@ from bisect import bisect_right
 Splits = tuple[list[float], list[float], list[float], list[float], list[float], list[float]]
 
 
+def straight(speed: float, ux: float, uy: float, age: float, pieces: int) -> Splits:
+    """The splits (as :meth:`Trail.splits` gives them) of a robot that drove straight along
+    the unit vector (``ux``, ``uy``) at ``speed`` [m/s] over the whole ``age`` [s], split
+    ``pieces`` ways: for a statement or a benchmark of the governor's discs."""
+    paths = [speed * age * (pieces - k) / pieces for k in range(pieces)]
+    inner = [speed * age * (pieces - k - 1) / pieces for k in range(pieces)]
+    return (paths, inner, [d * ux for d in paths], [d * uy for d in paths],
+            [d * ux for d in inner], [d * uy for d in inner])
+
+
 class Trail:
     """The believed positions of the last ``span`` [s]: their times [s], the positions [m]
     and the path [m] walked through them."""

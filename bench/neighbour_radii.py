@@ -19,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agent.config import ControlParams, RobotParams, commitment, disc_args  # noqa: E402
 from agent.governor import SPLITS, neighbour_radii  # noqa: E402
+from agent.trail import straight  # noqa: E402
 from hil.robot_profile import load_robot_profile  # noqa: E402
 
 NEIGHBOURS, ROUNDS, REPEATS = 20, 200, 7
@@ -31,10 +32,7 @@ def per_neighbour_us(robot_file: str | None, pace: float, age: float) -> float:
     robot = load_robot_profile(robot_file) if robot_file else RobotParams()
     half_base, disc = disc_args(control, robot, 1.0)
     commit = commitment(control, robot)
-    # this robot's path over each split of the age, straight along y at the pace
-    paths = [pace * age * (SPLITS - k) / SPLITS for k in range(SPLITS)]
-    inner = [pace * age * (SPLITS - k - 1) / SPLITS for k in range(SPLITS)]
-    trail = (paths, inner, [0.0] * SPLITS, paths, [0.0] * SPLITS, inner)
+    trail = straight(pace, 0.0, 1.0, age, SPLITS)   # this robot, along y at the pace
     calls = []
     for n in range(NEIGHBOURS):
         bearing, r = 2.0 * math.pi * n / NEIGHBOURS, 3.0 + 0.2 * n

@@ -25,6 +25,7 @@ from agent.governor import (
     turn_limit,
 )
 from agent.kinematics import arc_step, wrap_angle
+from agent.trail import straight
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
@@ -244,11 +245,7 @@ def test_a_neighbour_met_head_on_with_old_data_is_paired_with_this_robot_s_path(
 def _straight(speed: float, heading: float, age: float, splits: int = SPLITS) -> tuple:
     """The trail (agent.governor.neighbour_radii) of a robot driving straight along
     ``heading`` [rad] at ``speed`` [m/s] over ``age`` [s] split ``splits`` ways."""
-    paths = [speed * age * (splits - k) / splits for k in range(splits)]
-    inner = [speed * age * (splits - k - 1) / splits for k in range(splits)]
-    return (paths, inner, [d * math.cos(heading) for d in paths],
-            [d * math.sin(heading) for d in paths], [d * math.cos(heading) for d in inner],
-            [d * math.sin(heading) for d in inner])
+    return straight(speed, math.cos(heading), math.sin(heading), age, splits)
 
 
 def test_a_robot_driving_beside_a_neighbour_counts_little_of_its_own_motion():
