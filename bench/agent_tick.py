@@ -34,7 +34,7 @@ from helpers import SimClock  # noqa: E402
 
 from agent.config import ControlParams, RobotParams  # noqa: E402
 from agent.node import Agent  # noqa: E402
-from agent.settings import AgentSettings  # noqa: E402
+from agent.settings import AgentSettings, TimeoutSettings  # noqa: E402
 from common.payloads import MissionMsg, ObstaclesMsg, StateMsg  # noqa: E402
 from common.vocabulary import AgentMode, StateFlags  # noqa: E402
 
@@ -77,8 +77,9 @@ def main() -> None:
     ap.add_argument("--data-age", type=float, default=0.0, metavar="S",
                     help="the neighbours' states this old when the agent ticks [s]")
     args = ap.parse_args()
-    if not 0.0 <= args.data_age < 0.5:
-        ap.error("--data-age: from 0 up to the staleness limit, 0.5 s")
+    staleness = TimeoutSettings().staleness
+    if not 0.0 <= args.data_age < staleness:
+        ap.error(f"--data-age: from 0 up to the staleness limit, {staleness:g} s")
     robot = RobotParams()
     if args.robot:
         from hil.robot_profile import load_robot_profile

@@ -34,9 +34,7 @@ log = logging.getLogger(__name__)
 SOURCES = ("common.draws", "agent.kinematics", "agent.avoidance", "agent.law", "agent.formation",
            "agent.governor", "agent.neighbours", "agent.odometry", "firmware_sim.world_step",
            "firmware_sim.swarm_step")
-# modules whose functions are compiled into their callers: the governor's small helpers
-# run for every neighbour of every robot every period, and left to LLVM their calls to
-# each other stayed real calls
+# modules whose functions are compiled into their callers (module docstring)
 INLINED = ("agent.governor",)
 
 
