@@ -151,6 +151,7 @@ class SpeedEnvelope:
     data_age: float     # s, the expected age of neighbour data
     pace: float = 0.0   # m/s, the speed of the formation's places
     beside: float = 0.0  # m, the disc of a neighbour driving beside the robot at the pace
+    follow: float = 0.0  # m, the least gap to a robot ahead at the pace it keeps the pace at
 
     def describe(self) -> str:
         verdict = ("never limits driving in the open" if self.head_on >= self.top else
@@ -160,7 +161,8 @@ class SpeedEnvelope:
                 f"{self.data_age * 1e3:.0f} ms old it {verdict}; a robot driving beside "
                 f"it at the places' {self.pace:.2f} m/s is a disc of {self.beside:.2f} m: it "
                 f"passes between two such robots only where they are more than "
-                f"{self.passable:.2f} m apart")
+                f"{self.passable:.2f} m apart; behind one it keeps that pace only "
+                f"{self.follow:.2f} m or more back")
 
     @property
     def passable(self) -> float:
@@ -207,7 +209,45 @@ def speed_envelope(control: ControlParams, robot: RobotParams, sensing_range: fl
     beside = neighbour_radii(-sensing_range, trail[0][0], 0.5 * math.pi, pace, 0.0, data_age,
                              trail, disc[0], disc[1], half_base, *disc[2:],
                              *commitment(control, robot))[1]
-    return SpeedEnvelope(top, head_on, sensing_range, data_age, pace, beside)
+    follow = _follow(control, robot, sensing_range, data_age, pace)
+    return SpeedEnvelope(top, head_on, sensing_range, data_age, pace, beside, follow)
+
+
+def _follow(control: ControlParams, robot: RobotParams, sensing_range: float,
+            data_age: float, pace: float) -> float:
+    """The least gap [m] (to within a millimetre, at most ``sensing_range``) to a robot
+    straight ahead, both driving along the same line at ``pace`` [m/s], at which the
+    governor lets the robot behind go on at the pace, with data ``data_age`` [s] old:
+    the same law (agent.law's governor call) on the one hazard of the robot ahead."""
+    from agent.governor import SPLITS, neighbour_radii, slip_margin, speed_limits
+    from agent.law import LawParams
+    from agent.trail import straight
+    p = LawParams.of(control, robot)
+    half_base, disc = disc_args(control, robot, math.inf)
+    commit = commitment(control, robot)
+    trail = straight(pace, 1.0, 0.0, data_age, SPLITS)   # this robot, east at the pace
+    hold = max(control.period, p.watchdog)
+    top = 2.0 * math.pi * p.wheel_radius * p.speed_limit
+
+    def keeps_pace(gap: float) -> bool:
+        report = gap - pace * data_age      # m, east: where the one ahead was at its stamp
+        full, half, east, north, _ = neighbour_radii(
+            -report, 0.0, 0.0, pace, 0.0, data_age, trail, disc[0], disc[1], half_base,
+            *disc[2:], *commit)
+        fwd = speed_limits(0.0, 0.0, 0.0, pace, 0.0, [report + east], [north], [full],
+                           [half], [1.0], p.accel, hold, p.latency, p.u_max, p.wheel_base,
+                           top, slip_margin(p.slip, p.wheel_base), p.turn_up)[0]
+        return fwd >= pace
+
+    lo, hi = control.a, sensing_range
+    if pace <= 0.0 or keeps_pace(lo):
+        return lo
+    if not keeps_pace(hi):
+        return hi
+    while hi - lo > 1e-3:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if keeps_pace(mid) else (mid, hi)
+    return hi
 
 
 CONTROL_PARAMS = parameters(ControlParams, "BS_")

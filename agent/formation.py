@@ -93,6 +93,24 @@ class Formation:
         out = np.array([self.point(i, t) for i in range(len(self.offsets))]).reshape(-1, 4)
         return out[:, :2], out[:, 2:]
 
+    def min_ahead(self, cone: float = math.pi / 6.0, chunk: int = 512) -> float:
+        """Smallest distance [m] from a place to another one ahead of it, within ``cone``
+        [rad] of its velocity at t = 0 (inf: none; a place that does not move has nothing
+        ahead), in chunks of ``chunk`` rows as :meth:`min_spacing`."""
+        off, best = self.offsets, math.inf
+        vel = (np.asarray(self.velocity, float)[None, :]
+               + self.omega * np.column_stack([-off[:, 1], off[:, 0]]))
+        speed = np.hypot(vel[:, 0], vel[:, 1])
+        for lo in range(0, len(off), chunk):
+            rows, v, sp = off[lo:lo + chunk], vel[lo:lo + chunk], speed[lo:lo + chunk]
+            dx, dy = off[None, :, 0] - rows[:, None, 0], off[None, :, 1] - rows[:, None, 1]
+            d = np.hypot(dx, dy)
+            along = dx * v[:, None, 0] + dy * v[:, None, 1]       # d |v| cos(bearing)
+            ahead = (along > d * sp[:, None] * math.cos(cone)) & (d > 0.0)
+            if ahead.any():
+                best = min(best, float(d[ahead].min()))
+        return best
+
     def min_spacing(self, chunk: int = 512) -> float:
         """Smallest distance [m] between two reference positions (inf for one robot), in
         chunks of ``chunk`` rows so that 10 000 places need no N x N array."""

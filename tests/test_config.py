@@ -3,6 +3,7 @@ import dataclasses
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from agent.config import (
@@ -129,3 +130,29 @@ def test_flags_derived_from_a_section():
                           "robot-")
     with pytest.raises(SystemExit):
         parser.parse_args(["--robot-wheel-base", "wide"])
+
+
+@pytest.mark.parametrize("room, trails", [(-0.5, True), (0.5, False)])
+def test_the_envelope_says_how_close_behind_another_a_robot_keeps_the_pace(room, trails):
+    """Two sporty robots in a convoy at 3.5 m/s on a 0.5 s link, starting in their places:
+    with the places ``room`` [m] more than the envelope's following distance apart, the
+    one behind keeps its place; with less, the governor holds it back and it trails its
+    place by what is missing (closed loop, the batch simulator)."""
+    from agent.formation import Formation
+    from firmware_sim.batch import SimOptions, simulate
+    from firmware_sim.plant import PlantKind
+    from firmware_sim.world import Obstacles, WorldParams
+    from hil.robot_profile import load_robot_profile
+    robot = load_robot_profile(Path(__file__).resolve().parent.parent / "robots"
+                               / "sporty.toml")
+    p, pace, delay = ControlParams(), 3.5, 0.5
+    follow = speed_envelope(p, robot, 10.0, delay + p.period, pace).follow
+    assert 4.5 < follow < 6.0
+    gap = follow + room
+    form = Formation(np.array([[0.0, 0.0], [-gap, 0.0]]), (0.0, 0.0), (pace, 0.0))
+    poses = np.array([[0.0, 0.0, 0.0], [-gap, 0.0, 0.0]])
+    res = simulate(np.array([1, 2]), poses, form, Obstacles.empty(), p, robot,
+                   SimOptions(duration=20.0, plant=PlantKind.WHEELS, record_every=10),
+                   world=WorldParams(link_delay=delay))
+    behind = res.ref[-1, 1, 0] - res.pose[-1, 1, 0]        # m, the rear robot's lag
+    assert behind == pytest.approx(-room if trails else 0.0, abs=0.1)

@@ -39,6 +39,23 @@ def test_min_spacing_in_chunks_and_the_fastest_place():
     assert f.pace == pytest.approx(5.0 + 0.1 * np.linalg.norm(off, axis=1).max())
 
 
+def test_the_nearest_place_ahead_along_the_motion():
+    """A line across the motion has no place ahead of another; a grid moving along its
+    rows has one a spacing ahead; a ring turning about its centre, the next place along
+    the ring; chunks change nothing (a place within 30 degrees of the velocity counts)."""
+    line = formation_offsets(FormationKind.LINE, 5, 4.0)             # along y
+    assert Formation(line, (0.0, 0.0), (2.0, 0.0)).min_ahead() == math.inf
+    assert Formation(line, (0.0, 0.0), (0.0, 2.0)).min_ahead() == pytest.approx(4.0)
+    assert Formation(line, (0.0, 0.0)).min_ahead() == math.inf       # it does not move
+    grid = formation_offsets(FormationKind.GRID, 9, 5.0)
+    moving = Formation(grid, (0.0, 0.0), (1.0, 1.0))                # along a diagonal
+    assert moving.min_ahead() == pytest.approx(5.0 * math.sqrt(2.0))
+    assert moving.min_ahead(chunk=2) == moving.min_ahead()
+    ring = formation_offsets(FormationKind.CIRCLE, 20, 5.0)
+    chord = float(np.linalg.norm(ring[0] - ring[1]))
+    assert Formation(ring, (0.0, 0.0), omega=0.2).min_ahead() == pytest.approx(chord)
+
+
 def test_rotating_formation_velocity_is_the_derivative():
     f = Formation(formation_offsets(FormationKind.CIRCLE, 6, 4.0), (1.0, 2.0), (0.5, -0.2),
                   omega=0.3)
