@@ -37,14 +37,23 @@ import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from collections.abc import MutableSequence, Sequence
+    from typing import TypeAlias
+
+    import numpy as np
+    import numpy.typing as npt
+
     from agent.avoidance import FloatRows, FloatSeq
+
+    TrailRows: TypeAlias = Sequence[MutableSequence[float]] | npt.NDArray[np.float64]
 
 EPS = 1e-9
 SPLITS = 4           # pieces of a neighbour's data age paired with this robot's path
+TRAIL_ROWS = 10      # rows of a trail (:func:`trail_motion`)
 MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nearer the travel
-_STILL = ((0.0,),) * 6      # the trail of a robot that has not moved
+_STILL = ((0.0,),) * TRAIL_ROWS     # the trail of a robot that has not moved
 _BLIND = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)       # no line of sight (needed only with a trail)
-_NO_MOTION = (0.0,) * 8     # a split over which the robot did not move (_split_motion)
+_NO_MOTION = (0.0,) * 8     # a split over which the robot did not move (_own_share)
 
 
 def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: float,
@@ -122,7 +131,7 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
     one loop, as the agent runs it for every neighbour every period."""
     around = reach = -math.inf
     rho_age = math.inf
-    paths, inner = trail[0], trail[1]
+    paths = trail[0]
     splits = len(paths)
     dist, sx, sy, off, ex, ey = sight
     speed, half_turn = abs(speed), 0.5 * abs(turn_rate)
@@ -132,9 +141,8 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
     # path since its split's start, so a split whose sum cannot beat the largest so far
     # needs no share
     for k in range(splits - 1, -1, -1):
-        if k + 1 < splits and (paths[k] == inner[k] or _same_motion(trail, k)):
-            continue    # still within it, or moved as over the next split, whose end is
-            #             later: the next split dominates
+        if k + 1 < splits and trail[9][k] != 0.0:
+            continue    # the next split dominates it (trail_motion)
         t = max(age * (k + 1) / splits, 0.0)
         # travel: its wheels within a ramp of the command it reported for the lag, then
         # its speed grown by at most up since (or, more loosely, the ramp all along)
@@ -154,7 +162,8 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
         path = paths[k]
         if a + grow + path <= around and a + rho + path <= reach:
             continue
-        motion = _split_motion(trail, k) if path > 0.0 else _NO_MOTION
+        motion = ((path, trail[2][k], trail[3][k], trail[6][k], trail[4][k], trail[5][k],
+                   trail[7][k], trail[8][k]) if path > 0.0 else _NO_MOTION)
         if a + grow + path > around:
             around = max(around, a + grow + _own_share(motion, sx, sy, sx, sy, dist, grow))
         if a + rho + path > reach:
@@ -162,32 +171,35 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
     return around, reach, rho_age
 
 
-def _same_motion(trail: FloatRows, k: int) -> bool:
-    """Whether this robot's motion over split ``k`` of ``trail`` (as
-    :func:`neighbour_radii`) is that over split k + 1: the same positions at and after
-    their starts and ends, as where both fall between two recorded positions (data younger
-    than the robot's period)."""
-    for row in range(6):
-        if trail[row][k] != trail[row][k + 1]:
-            return False
-    return True
-
-
-def _split_motion(trail: FloatRows, k: int
-                  ) -> tuple[float, float, float, float, float, float, float, float]:
-    """This robot's motion over split ``k`` of ``trail`` (as :func:`neighbour_radii`), as
-    :func:`_own_share` takes it: (path [m] since the split's start; displacement east and
-    north [m] since its start and its length; the same since its end; half the minor axis
-    [m] of the ellipse of the positions it can have had within the split). Computed once
-    for the two shares of a split."""
-    path = trail[0][k]
-    start_x, start_y, end_x, end_y = trail[2][k], trail[3][k], trail[4][k], trail[5][k]
-    within = path - trail[1][k]            # m, walked within the split
-    chord_x, chord_y = start_x - end_x, start_y - end_y
-    bulge = 0.5 * math.sqrt(max(within * within - chord_x * chord_x - chord_y * chord_y,
-                                0.0))
-    return (path, start_x, start_y, math.sqrt(start_x * start_x + start_y * start_y),
-            end_x, end_y, math.sqrt(end_x * end_x + end_y * end_y), bulge)
+def trail_motion(trail: TrailRows) -> None:
+    """Fill rows 6 to 9 of ``trail`` (:func:`neighbour_radii`) from its first six, once
+    for all the neighbours that share it: for each split k, the lengths [m] of this
+    robot's displacement since the split's start and since its end; half the minor axis
+    [m] of the ellipse of the positions it can have had within the split (foci where it
+    was at the split's start and end, the path walked within it); and 1.0 where the next
+    split dominates split k (it stood still within k, or moved over k as over k + 1:
+    the same positions at and after their starts and ends, as where both fall between
+    two recorded positions, data younger than the robot's period; the next split ends
+    later), else 0.0 (the last split: 0.0)."""
+    splits = len(trail[0])
+    for k in range(splits):
+        path, start_x, start_y = trail[0][k], trail[2][k], trail[3][k]
+        end_x, end_y = trail[4][k], trail[5][k]
+        within = path - trail[1][k]            # m, walked within the split
+        chord_x, chord_y = start_x - end_x, start_y - end_y
+        trail[6][k] = math.sqrt(start_x * start_x + start_y * start_y)
+        trail[7][k] = math.sqrt(end_x * end_x + end_y * end_y)
+        trail[8][k] = 0.5 * math.sqrt(max(within * within - chord_x * chord_x
+                                          - chord_y * chord_y, 0.0))
+        dominated = 0.0
+        if k + 1 < splits:
+            dominated = 1.0 if path == trail[1][k] else 0.0
+            if dominated == 0.0:
+                dominated = 1.0
+                for row in range(6):
+                    if trail[row][k] != trail[row][k + 1]:
+                        dominated = 0.0
+        trail[9][k] = dominated
 
 
 def _own_share(motion: tuple[float, float, float, float, float, float, float, float],
@@ -195,7 +207,9 @@ def _own_share(motion: tuple[float, float, float, float, float, float, float, fl
                ) -> float:
     """How much [m] of the gap to a neighbour this robot's own motion takes from its half,
     the neighbour having last acted within a split of its data's age over which this
-    robot moved by ``motion`` (:func:`_split_motion`), at a point within ``radius`` [m] of
+    robot moved by ``motion`` (path [m] since the split's start; displacement east and
+    north [m] since its start and its length; the same since its end; the ellipse's half
+    minor axis [m]: the rows of :func:`trail_motion`), at a point within ``radius`` [m] of
     a set this robot sees at ``dist`` [m] (its distance to the set's nearest point) and
     between the unit directions (``sx``, ``sy``) and (``ex``, ``ey``) (the shorter arc).
 
@@ -253,9 +267,10 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     [m] of its claim's disc, which the law passes round (A13): the same as ``half`` unless
     this robot is behind it (below). ``trail``: this
     robot's motion over each of the splits of the age into equal pieces, the stamp's
-    first (agent.trail.Trail.splits): six rows, its path [m] since each split's start
-    and since its end, and its displacement (east, north) [m] since the start and since
-    the end (the other arguments as there and :func:`approach`).
+    first (agent.trail.Trail.splits): its path [m] since each split's start and since
+    its end, and its displacement (east, north) [m] since the start and since the end,
+    then the rows :func:`trail_motion` derives from those (the other arguments as there
+    and :func:`approach`).
 
     Heard from, on wheels of finite ramp, the neighbour can be now within rho of the
     segment from its reported position to where its report extrapolates to now

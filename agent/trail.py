@@ -10,7 +10,18 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 
-Splits = tuple[list[float], list[float], list[float], list[float], list[float], list[float]]
+from agent.governor import TRAIL_ROWS, trail_motion
+
+Splits = tuple[list[float], ...]
+
+
+def with_motion(rows: tuple[list[float], ...]) -> Splits:
+    """The six rows of a trail (:meth:`Trail.splits`) completed with the rows the governor
+    derives from them (agent.governor.trail_motion)."""
+    pieces = len(rows[0])
+    trail = tuple(rows) + tuple([0.0] * pieces for _ in range(TRAIL_ROWS - len(rows)))
+    trail_motion(trail)
+    return trail
 
 
 def straight(speed: float, ux: float, uy: float, age: float, pieces: int) -> Splits:
@@ -19,8 +30,8 @@ def straight(speed: float, ux: float, uy: float, age: float, pieces: int) -> Spl
     ``pieces`` ways: for a statement or a benchmark of the governor's discs."""
     paths = [speed * age * (pieces - k) / pieces for k in range(pieces)]
     inner = [speed * age * (pieces - k - 1) / pieces for k in range(pieces)]
-    return (paths, inner, [d * ux for d in paths], [d * uy for d in paths],
-            [d * ux for d in inner], [d * uy for d in inner])
+    return with_motion((paths, inner, [d * ux for d in paths], [d * uy for d in paths],
+                        [d * ux for d in inner], [d * uy for d in inner]))
 
 
 class Trail:
@@ -36,7 +47,7 @@ class Trail:
         # the last splits asked for, until the next record: neighbours whose states carry
         # the same stamp (robots ticking on a common grid) share them
         self._asked: tuple[float, float, int] | None = None
-        self._answer: Splits = ([], [], [], [], [], [])
+        self._answer: Splits = ()
 
     def record(self, t: float, x: float, y: float) -> None:
         """The position (x, y) [m] at time t [s] (non-decreasing)."""
@@ -57,14 +68,14 @@ class Trail:
         position from the last position recorded at or before the piece's start, and from
         the first at or after its end (the newest, if none); the displacement east and
         north [m] to the newest position from each of those two. All zero before any.
-        The lists are shared with the next caller asking the same: read, do not change."""
+        Then the rows the governor derives from those (agent.governor.trail_motion). The
+        lists are shared with the next caller asking the same: read, do not change."""
         asked = (start, span, pieces)
         if asked == self._asked:
             return self._answer
         t, path, xs, ys = self._t, self._path, self._x, self._y
         if not path:
-            return ([0.0] * pieces, [0.0] * pieces, [0.0] * pieces, [0.0] * pieces,
-                    [0.0] * pieces, [0.0] * pieces)
+            return with_motion(tuple([0.0] * pieces for _ in range(6)))
         last, newest, x, y = path[-1], len(path) - 1, xs[-1], ys[-1]
         # each boundary's last position at or before it, and first at or after it
         before, after = [], []
@@ -74,8 +85,8 @@ class Trail:
             before.append(max(i - 1, 0))
             after.append(min(i - 1 if i > 0 and t[i - 1] == edge else i, newest))
         first, end = before[:-1], after[1:]
-        answer: Splits = ([last - path[i] for i in first], [last - path[j] for j in end],
-                          [x - xs[i] for i in first], [y - ys[i] for i in first],
-                          [x - xs[j] for j in end], [y - ys[j] for j in end])
+        answer = with_motion(([last - path[i] for i in first], [last - path[j] for j in end],
+                              [x - xs[i] for i in first], [y - ys[i] for i in first],
+                              [x - xs[j] for j in end], [y - ys[j] for j in end]))
         self._asked, self._answer = asked, answer
         return answer

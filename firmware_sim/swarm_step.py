@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from agent.formation import reference_point
-from agent.governor import SPLITS, neighbour_radii, silent_radius
+from agent.governor import SPLITS, TRAIL_ROWS, neighbour_radii, silent_radius, trail_motion
 from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
 from agent.law import LawMemory, LawParams, law_step, pair_active
 from firmware_sim.world_step import FRESH, NONE, STALE, detect
@@ -179,7 +179,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     o_k = np.empty(cap, np.int64)
     h_x, h_y, h_r = np.empty(2 * cap), np.empty(2 * cap), np.empty(2 * cap)
     h_h, h_m = np.empty(2 * cap), np.empty(2 * cap)
-    trail = np.empty((6, SPLITS))     # agent.governor.neighbour_radii's own motion
+    trail = np.empty((TRAIL_ROWS, SPLITS))    # agent.governor.neighbour_radii's own motion
     for i in range(lo, hi):
         x, y = own[i, 0], own[i, 1]
         m = sense_neighbours(i, x, y, sorted_seen, sensing_range, seen_grid, cap, nbr_x,
@@ -221,6 +221,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                     trail[3, piece] = now[1] - start[1]
                     trail[4, piece] = now[0] - end[0]
                     trail[5, piece] = now[1] - end[1]
+                trail_motion(trail)
             full, half, east, north, claim = neighbour_radii(
                 x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3], view[j, 4], age,
                 trail, a, p.accel, 0.5 * p.wheel_base, top_speed, staleness, stop_time,

@@ -12,7 +12,6 @@ from agent.governor import (
     SPLITS,
     _own_share,
     _paired,
-    _split_motion,
     approach,
     braking_speed,
     neighbour_hazard,
@@ -25,7 +24,7 @@ from agent.governor import (
     turn_limit,
 )
 from agent.kinematics import arc_step, wrap_angle
-from agent.trail import straight
+from agent.trail import straight, with_motion
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
@@ -102,8 +101,10 @@ def test_this_robot_s_share_of_its_own_motion_keeps_two_stops_apart(pts, moves, 
     off = _segment_distance(p, s, e)
     units = [((pt[0] - p[0]) / max(dist(pt, p), 1e-12), (pt[1] - p[1]) / max(dist(pt, p), 1e-12))
              for pt in (s, e)]
-    motion = _split_motion(([path], [path - within], [p[0] - start[0]], [p[1] - start[1]],
-                            [p[0] - w[0]], [p[1] - w[1]]), 0)
+    trail = with_motion(([path], [path - within], [p[0] - start[0]], [p[1] - start[1]],
+                         [p[0] - w[0]], [p[1] - w[1]]))
+    motion = (path, trail[2][0], trail[3][0], trail[6][0], trail[4][0], trail[5][0],
+              trail[7][0], trail[8][0])
     share = _own_share(motion, *units[0], *units[1], off, g)
     assert 0.0 <= share <= path
     own = 0.5 * (off - A - g - share)
@@ -181,9 +182,11 @@ def test_pairing_the_neighbour_s_travel_with_this_robot_s_path_keeps_stops_apart
         walked.insert(0, walked[0] + math.dist(p[k], p[k - 1]))
     ends = [round(steps * k / SPLITS) for k in range(SPLITS + 1)]
     now = p[-1]
-    trail = ([walked[i] for i in ends[:-1]], [walked[i] for i in ends[1:]],
-             [now[0] - p[i][0] for i in ends[:-1]], [now[1] - p[i][1] for i in ends[:-1]],
-             [now[0] - p[i][0] for i in ends[1:]], [now[1] - p[i][1] for i in ends[1:]])
+    trail = with_motion(([walked[i] for i in ends[:-1]], [walked[i] for i in ends[1:]],
+                         [now[0] - p[i][0] for i in ends[:-1]],
+                         [now[1] - p[i][1] for i in ends[:-1]],
+                         [now[0] - p[i][0] for i in ends[1:]],
+                         [now[1] - p[i][1] for i in ends[1:]]))
     full, half, east, north, _ = neighbour_radii(now[0], now[1], 0.0, v, u, age, trail, A,
                                               ACCEL, half_base, TOP, STALE, STOP, 8.0,
                                               math.inf, 0.0, math.inf)
@@ -606,8 +609,8 @@ def test_the_pairing_takes_the_largest_of_all_splits(speed, turn_rate, age, path
     are the shares of a split whose sum cannot beat the largest so far); rho is the last
     split's, the whole age's."""
     paths = [sum(path[k:]) for k in range(SPLITS)]     # the path since each split's start
-    trail = (paths, paths[1:] + [0.0], paths, [0.0] * SPLITS, paths[1:] + [0.0],
-             [0.0] * SPLITS)                                   # straight along x
+    trail = with_motion((paths, paths[1:] + [0.0], paths, [0.0] * SPLITS,
+                         paths[1:] + [0.0], [0.0] * SPLITS))   # straight along x
     sight = (5.0, 1.0, 0.0, 4.5, 0.8, 0.6)
     got = _paired(trail, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04, up, sight)
     alone = [_paired([[row[k]] for row in trail], age * (k + 1) / SPLITS, speed, turn_rate,
@@ -625,8 +628,8 @@ def test_data_younger_than_a_period_pairs_one_motion(speed, turn_rate, age, move
     recorded position and ends at the newest, so the robot moved as much over each; the
     last split, with the latest end, gives the discs, bit for bit as pairing each alone."""
     east, north = moved * math.cos(angle), moved * math.sin(angle)
-    trail = ([moved] * SPLITS, [0.0] * SPLITS, [east] * SPLITS, [north] * SPLITS,
-             [0.0] * SPLITS, [0.0] * SPLITS)
+    trail = with_motion(([moved] * SPLITS, [0.0] * SPLITS, [east] * SPLITS,
+                         [north] * SPLITS, [0.0] * SPLITS, [0.0] * SPLITS))
     sight = (3.0, 0.6, 0.8, 2.9, 0.8, 0.6)
     got = _paired(trail, age, speed, turn_rate, A, ACCEL, 0.4, TOP, up, 0.04, up, sight)
     alone = [_paired([[row[k]] for row in trail], age * (k + 1) / SPLITS, speed, turn_rate,
@@ -641,7 +644,7 @@ def test_a_split_is_skipped_only_where_its_sum_cannot_round_above_the_largest():
     robot 5 cm from the report), and the disc lost that ulp."""
     p0, p3 = 0.7054340045891819, 0.10543400458918173
     paths, inner = [p0, p3, p3, p3], [p3, p3, p3, 0.0]
-    trail = (paths, inner, paths, [0.0] * SPLITS, inner, [0.0] * SPLITS)
+    trail = with_motion((paths, inner, paths, [0.0] * SPLITS, inner, [0.0] * SPLITS))
     sight = (0.05, -1.0, 0.0, 0.0, 1.0, 0.0)       # 5 cm behind the report, on its segment
     args = (1.5, 5.0, 0.5, 2.0, 0.4, 3.0, 2.0, 0.04, 2.0, sight)
     got = _paired(trail, 0.4, *args)

@@ -38,10 +38,11 @@ def test_it_keeps_its_span_and_no_more():
 
 def test_the_splits_of_an_age_give_the_motion_since_each_piece_s_start_and_end():
     trail = Trail(span=1.0)
-    assert trail.splits(0.0, 0.3, 4) == ([0.0] * 4,) * 6     # nothing recorded yet
+    assert trail.splits(0.0, 0.3, 4)[:6] == ([0.0] * 4,) * 6     # nothing recorded yet
     for k, (x, y) in enumerate([(0, 0), (3, 4), (3, 4), (6, 8), (6, 0)]):
         trail.record(0.1 * k, x, y)
-    paths, inner, east, north, end_east, end_north = trail.splits(0.05, 0.3, 3)
+    rows = trail.splits(0.05, 0.3, 3)
+    paths, inner, east, north, end_east, end_north = rows[:6]
     assert paths == [since(trail, 0.05), since(trail, 0.15), since(trail, 0.25)]
     assert paths == pytest.approx([18.0, 13.0, 13.0])
     # from the first position at or after each piece's end: 0.2 (3, 4), 0.3 (6, 8), 0.4
@@ -52,6 +53,15 @@ def test_the_splits_of_an_age_give_the_motion_since_each_piece_s_start_and_end()
     # and at each end: (3, 4), (6, 8), (6, 0)
     assert end_east == pytest.approx([3.0, 0.0, 0.0])
     assert end_north == pytest.approx([-4.0, -8.0, 0.0])
+    # what the governor derives (agent.governor.trail_motion): the displacements' lengths,
+    # the half minor axis of the ellipse of where the robot was within each piece (5 m
+    # walked between foci 5 m apart, (0, 0) and (3, 4), then (3, 4) and (6, 8): a segment;
+    # 13 m walked from (3, 4) to (6, 0), foci 5 m apart: 6 m), and whether the next piece
+    # dominates (none here: each moved otherwise)
+    assert rows[6] == pytest.approx([6.0, 5.0, 5.0])
+    assert rows[7] == pytest.approx([5.0, 8.0, 0.0])
+    assert rows[8] == pytest.approx([0.0, 0.0, 6.0])
+    assert rows[9] == [0.0, 0.0, 0.0]
 
 
 def test_the_splits_asked_again_are_the_same_until_the_next_record():
