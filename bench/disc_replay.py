@@ -30,7 +30,7 @@ from hil.robot_profile import load_robot_profile
 
 def record(robots: int, periods: int, robot_file: str, delay: float
            ) -> tuple[np.ndarray, np.ndarray]:
-    """(arguments (C, 16) but the trail, trails (C, 6, splits)) of every disc built."""
+    """(arguments (C, 16) but the trail, trails (C, rows, splits)) of every disc built."""
     rows: list[list[float]] = []
     trails: list[np.ndarray] = []
     built = swarm_step.neighbour_radii
