@@ -151,7 +151,7 @@ class SpeedEnvelope:
     data_age: float     # s, the expected age of neighbour data
     pace: float = 0.0   # m/s, the speed of the formation's places
     beside: float = 0.0  # m, the disc of a neighbour driving beside the robot at the pace
-    follow: float = 0.0  # m, the least gap to a robot ahead at the pace it keeps the pace at
+    follow: float = 0.0  # m, the least gap behind a robot at the pace that lets it keep it
 
     def describe(self) -> str:
         verdict = ("never limits driving in the open" if self.head_on >= self.top else

@@ -191,15 +191,14 @@ def trail_motion(trail: TrailRows) -> None:
         trail[7][k] = math.sqrt(end_x * end_x + end_y * end_y)
         trail[8][k] = 0.5 * math.sqrt(max(within * within - chord_x * chord_x
                                           - chord_y * chord_y, 0.0))
-        dominated = 0.0
-        if k + 1 < splits:
-            dominated = 1.0 if path == trail[1][k] else 0.0
-            if dominated == 0.0:
-                dominated = 1.0
-                for row in range(6):
-                    if trail[row][k] != trail[row][k + 1]:
-                        dominated = 0.0
-        trail[9][k] = dominated
+        if k + 1 == splits:
+            trail[9][k] = 0.0
+            continue
+        same = 1.0                             # moved over k as over k + 1
+        for row in range(6):
+            if trail[row][k] != trail[row][k + 1]:
+                same = 0.0
+        trail[9][k] = 1.0 if path == trail[1][k] else same     # or stood still within k
 
 
 def _own_share(motion: tuple[float, float, float, float, float, float, float, float],

@@ -508,6 +508,17 @@ def test_every_shipped_campaign_expands(spec_file, families):
     assert spec.runs and len({r.key for r in spec.runs}) == len(spec.runs)
 
 
+def test_the_sparse_campaign_is_the_realistic_campaign_s_sparse_runs(families):
+    """campaigns/realistic-sparse.toml runs issue 16's measure alone: the very runs (keys,
+    so scenes and worlds) of the full campaign's sparse fields, and no others."""
+    from hil.campaign_spec import load_spec
+    full = load_spec(ROOT / "campaigns" / "realistic.toml")
+    sparse = {r.key for r in full.runs
+              if r.description.get("family", {}).get("field") == "sparse"}
+    assert len(sparse) == 720
+    assert {r.key for r in load_spec(ROOT / "campaigns" / "realistic-sparse.toml").runs} == sparse
+
+
 def test_the_speed_up_campaign_sets_speed_up_on_one_of_each_pair(families):
     from hil.campaign_spec import load_spec
     spec = load_spec(ROOT / "campaigns" / "speed-up.toml")
