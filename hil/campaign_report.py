@@ -164,6 +164,15 @@ def write_report(name: str, rows: list[dict[str, Any]], folder: Path, total: int
         path = _rates_figure(dim, groups, figures)
         lines += ["", f"## By {dim}", "", *_table(dim, groups), "",
                   f"![rates by {dim}]({FIGURES}/{path.name})"]
+    held = sorted({_hashable(r.get("pace_held")) for r in ok}, key=_order)
+    if False in held:
+        groups = [(_label(v), Group(r for r in rows if r.get("pace_held") == v))
+                  for v in held]
+        lines += ["", "## By pace_held", "",
+                  "Whether the governor lets a robot keep the formation's pace behind the "
+                  "place ahead of its own with the run's data age (`pace_held`): where it "
+                  "does not, that robot trails its place and the run cannot converge.", "",
+                  *_table("pace_held", groups)]
     lines += ["", "## Distances", ""]
     for key, title, fname in (("min_pair_distance", "closest pair of robots", "min_distance"),
                               ("min_obstacle_clearance", "smallest obstacle clearance",

@@ -271,6 +271,44 @@ def test_a_run_that_raises_is_a_failed_row(monkeypatch):
     assert row["family_kind"] == "line" and row["seed"] == 0 and "converged" not in row
 
 
+@pytest.mark.parametrize("delay, held", [(0.0, True), (0.5, False)])
+def test_a_row_says_whether_the_governor_lets_robots_keep_the_formation_s_pace(
+        delay, held, families):
+    """The realistic campaign's rotating ring of 20 sporty robots: its places 5 m apart
+    move at up to 3.6 m/s, which with 0.5 s old data needs 5.2 m behind each robot
+    (docs/controller.md A10): the row's pace_held is false, as sim warns; without delay,
+    true."""
+    from hil.campaign_run import run_one
+    from hil.campaign_spec import load_spec
+    spec = load_spec(ROOT / "campaigns" / "realistic-sparse.toml")
+    desc = next(dict(r.description) for r in spec.runs
+                if r.description["family"]["kind"] == "rotating_circle"
+                and r.description["family"]["robots"] == 20
+                and r.description["profile"] == "sporty"
+                and r.description["world"]["link_delay"] == delay)
+    desc["duration"] = 0.5
+    row = run_one(desc)
+    assert row["status"] == "ok" and row["pace_held"] is held
+
+
+def test_the_report_counts_the_runs_whose_formation_cannot_be_held_apart(tmp_path):
+    """With any run whose formation the governor cannot hold at its pace, the report
+    tallies pace_held yes and no; without one, it has no such section."""
+    from hil.campaign_report import write_report
+
+    def row(key, held, converged):
+        return {"key": key, "status": "ok", "profile": "sporty", "safe": True,
+                "converged": converged, "deadlock": not converged, "pace_held": held,
+                "min_pair_distance": 2.0, "min_obstacle_clearance": None, "a": 1.0}
+    rows = [row("a", True, True), row("b", True, False), row("c", False, False)]
+    report = write_report("t", rows, tmp_path / "one", 3).read_text()
+    assert "## By pace_held" in report
+    assert re.search(r"\| no \| 1 \| 0 \| 100\.0 % [^|]*\| 0\.0 % ", report)
+    assert re.search(r"\| yes \| 2 \| 0 \| 100\.0 % [^|]*\| 50\.0 % ", report)
+    held = [row("a", True, True), row("b", None, False)]
+    assert "pace_held" not in write_report("t", held, tmp_path / "two", 2).read_text()
+
+
 def test_warming_up_leaves_out_a_worker_lost_meanwhile():
     """A worker starved past its heartbeats during the warm-up is restarted by its nanny,
     and the broadcast to it fails: the campaign goes on with the others (a campaign run
@@ -464,7 +502,8 @@ def test_smoke_report_has_groups_and_intervals_and_its_replay_writes_a_run_folde
     keys = table.column("key").to_pylist()
     assert keys == sorted(keys) and len(keys) == len(set(keys))
     for column in ("family_kind", "micro", "seed", "profile", "world_link_delay", "kill",
-                   "kill_robot", "safe", "converged", "deadlock", "min_pair_distance",
+                   "kill_robot", "safe", "converged", "deadlock", "pace_held",
+                   "min_pair_distance",
                    "min_obstacle_clearance", "convergence_time", "stuck_robots"):
         assert column in table.column_names, column
     assert "seconds" not in table.column_names
