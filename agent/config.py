@@ -218,25 +218,22 @@ def _follow(control: ControlParams, robot: RobotParams, sensing_range: float,
     """The least gap [m] (to within a millimetre, at most ``sensing_range``) to a robot
     straight ahead, both driving along the same line at ``pace`` [m/s], at which the
     governor lets the robot behind go on at the pace, with data ``data_age`` [s] old:
-    the same law (agent.law's governor call) on the one hazard of the robot ahead."""
-    from agent.governor import SPLITS, neighbour_radii, slip_margin, speed_limits
-    from agent.law import LawParams
+    the law's governor (agent.law.governor_limits) on the one hazard of the robot ahead."""
+    from agent.governor import SPLITS, neighbour_radii
+    from agent.law import LawParams, governor_limits
     from agent.trail import straight
     p = LawParams.of(control, robot)
     half_base, disc = disc_args(control, robot, math.inf)
     commit = commitment(control, robot)
     trail = straight(pace, 1.0, 0.0, data_age, SPLITS)   # this robot, east at the pace
-    hold = max(control.period, p.watchdog)
-    top = 2.0 * math.pi * p.wheel_radius * p.speed_limit
 
     def keeps_pace(gap: float) -> bool:
         report = gap - pace * data_age      # m, east: where the one ahead was at its stamp
         full, half, east, north, _ = neighbour_radii(
             -report, 0.0, 0.0, pace, 0.0, data_age, trail, disc[0], disc[1], half_base,
             *disc[2:], *commit)
-        fwd = speed_limits(0.0, 0.0, 0.0, pace, 0.0, [report + east], [north], [full],
-                           [half], [1.0], p.accel, hold, p.latency, p.u_max, p.wheel_base,
-                           top, slip_margin(p.slip, p.wheel_base), p.turn_up)[0]
+        fwd = governor_limits(0.0, 0.0, 0.0, pace, 0.0, [report + east], [north], [full],
+                              [half], [1.0], p, control.period)[0]
         return fwd >= pace
 
     lo, hi = control.a, sensing_range

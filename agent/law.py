@@ -328,13 +328,10 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     top = TWO_PI * p.wheel_radius * p.speed_limit      # the wheels' own limit [m/s]
     fwd = bwd = math.inf
     if p.governor:
-        # slipping wheels: room kept for the drift of a turn on the spot, turns that fit it
-        hold = max(dt, p.watchdog)
-        fwd, bwd, room = speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r,
-                                      haz_half, haz_moving, p.accel, hold, p.latency,
-                                      p.u_max, p.wheel_base, top,
-                                      slip_margin(p.slip, p.wheel_base), p.turn_up)
-        u_cap = turn_limit(room, p.slip, p.accel, hold + p.latency, p.wheel_base)
+        fwd, bwd, room = governor_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r,
+                                         haz_half, haz_moving, p, dt)
+        u_cap = turn_limit(room, p.slip, p.accel, max(dt, p.watchdog) + p.latency,
+                           p.wheel_base)
         u = min(max(u, -u_cap), u_cap)
     allowed = fwd if v >= 0.0 else bwd
     governed = allowed if abs(v) > allowed and allowed < top else math.inf
@@ -371,6 +368,21 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
         v, u = body_velocity(TWO_PI * wr, TWO_PI * wl, p.wheel_radius, p.wheel_base)
     return v, u, mode, governed, LawMemory(ex, ey, True, avoiding, side, center_x, center_y,
                                            radius, wr, wl, passing_side)
+
+
+def governor_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
+                    haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq, haz_half: FloatSeq,
+                    haz_moving: FloatSeq, p: LawParams, dt: float
+                    ) -> tuple[float, float, float]:
+    """The safety governor's (forward, backward) speed limits [m/s] and room [m] for the
+    robot of :func:`law_step` (agent.governor.speed_limits with this law's robot: a
+    command held for a period, or the drivers' watchdog should the agent die, then the
+    drive latency; its wheels' top speed; room kept for the drift of a turn on the spot
+    on slipping wheels)."""
+    return speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r, haz_half,
+                        haz_moving, p.accel, max(dt, p.watchdog), p.latency, p.u_max,
+                        p.wheel_base, TWO_PI * p.wheel_radius * p.speed_limit,
+                        slip_margin(p.slip, p.wheel_base), p.turn_up)
 
 
 def in_the_way(heading: float, x: float, y: float, nbr_x: FloatSeq, nbr_y: FloatSeq,

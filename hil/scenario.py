@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.config import ControlParams, RobotParams
+from agent.config import ControlParams, RobotParams, SpeedEnvelope, speed_envelope
 from agent.formation import Formation, FormationKind, formation_offsets
 from common.schema import ConfigError, TableReader, from_table, load_toml
 from firmware_sim.mocap_sim import MocapParams
@@ -55,6 +55,18 @@ class Scenario:
     robot_given: bool = False   # the file has a [robot] table (else RobotParams' defaults)
     mocap: MocapParams | None = None   # a simulated motion-capture system
     assign: str = "listed"      # [formation] assign: how the places were given (hil.assignment)
+
+    def envelope(self) -> SpeedEnvelope:
+        """What the safety governor allows this scenario's robot (agent.config.
+        speed_envelope) at its formation's pace, with neighbour data a link delay and a
+        period old."""
+        return speed_envelope(self.control, self.robot, self.sensing_range,
+                              self.world.link_delay + self.control.period, self.formation.pace)
+
+    def pace_held(self, envelope: SpeedEnvelope) -> bool:
+        """Whether no place lies closer behind another, along the formation's motion,
+        than ``envelope``'s following gap: else the rear place's robot trails it."""
+        return bool(self.formation.min_ahead() >= envelope.follow)
 
 
 TOP_KEYS = {"name", "duration", "control", "robot", "sim", "formation", "robots", "obstacles",

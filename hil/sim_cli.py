@@ -87,9 +87,7 @@ def state_envelope(console: Console, sc: Scenario) -> None:
     speed_envelope) with neighbour data a link delay and a period old, and warn when the
     formation's places are too close for a robot to pass between two robots in them, or
     one behind another too close for the governor to let a robot keep the pace."""
-    from agent.config import speed_envelope
-    envelope = speed_envelope(sc.control, sc.robot, sc.sensing_range,
-                              sc.world.link_delay + sc.control.period, sc.formation.pace)
+    envelope = sc.envelope()
     console.print(envelope.describe())
     spacing = sc.formation.min_spacing()
     if spacing <= envelope.passable:
@@ -98,10 +96,9 @@ def state_envelope(console: Console, sc: Scenario) -> None:
                       f"robots in their places, and one whose place is across the formation "
                       f"waits behind it; give the places more room, or let the mission "
                       f"assign them (\\[formation] assign = \"shortest\")[/yellow]")
-    ahead = sc.formation.min_ahead()
-    if ahead < envelope.follow:
-        console.print(f"[yellow]warning: a place lies {ahead:.2f} m behind another along "
-                      f"the formation's motion: with data this old the governor holds a robot "
-                      f"that close behind another below the pace, so it trails its place; "
-                      f"give the places more room along the motion or move the formation "
-                      f"more slowly[/yellow]")
+    if not sc.pace_held(envelope):
+        console.print(f"[yellow]warning: a place lies {sc.formation.min_ahead():.2f} m "
+                      f"behind another along the formation's motion: with data this old the "
+                      f"governor holds a robot that close behind another below the pace, so "
+                      f"it trails its place; give the places more room along the motion or "
+                      f"move the formation more slowly[/yellow]")
