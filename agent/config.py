@@ -218,23 +218,23 @@ def _follow(control: ControlParams, robot: RobotParams, sensing_range: float,
     """The least gap [m] (to within a millimetre, at most ``sensing_range``) to a robot
     straight ahead, both driving along the same line at ``pace`` [m/s], at which the
     governor lets the robot behind go on at the pace, with data ``data_age`` [s] old:
-    the law's governor (agent.law.governor_limits) on the one hazard of the robot ahead."""
-    from agent.governor import SPLITS, neighbour_radii
-    from agent.law import LawParams, governor_limits
+    the law's governor (agent.law.governor_frame) on the one hazard of the robot ahead."""
+    from agent.governor import NO_GAPS, SPLITS, fold_hazard, frame_limits, neighbour_radii
+    from agent.law import LawParams, governor_frame
     from agent.trail import straight
     p = LawParams.of(control, robot)
     half_base, disc = disc_args(control, robot, math.inf)
     commit = commitment(control, robot)
     trail = straight(pace, 1.0, 0.0, data_age, SPLITS)   # this robot, east at the pace
+    frame = governor_frame(0.0, pace, 0.0, p, control.period)
 
     def keeps_pace(gap: float) -> bool:
         report = gap - pace * data_age      # m, east: where the one ahead was at its stamp
         full, half, east, north, _ = neighbour_radii(
             -report, 0.0, 0.0, pace, 0.0, data_age, trail, disc[0], disc[1], half_base,
             *disc[2:], *commit)
-        fwd = governor_limits(0.0, 0.0, 0.0, pace, 0.0, [report + east], [north], [full],
-                              [half], [1.0], p, control.period)[0]
-        return fwd >= pace
+        gaps = fold_hazard(NO_GAPS, frame, report + east, north, full, half, 1.0)
+        return frame_limits(gaps, frame)[0] >= pace
 
     lo, hi = control.a, sensing_range
     if pace <= 0.0 or keeps_pace(lo):

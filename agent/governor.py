@@ -46,6 +46,7 @@ if TYPE_CHECKING:
     from agent.avoidance import FloatRows, FloatSeq
 
     TrailRows: TypeAlias = Sequence[MutableSequence[float]] | npt.NDArray[np.float64]
+    Frame: TypeAlias = tuple[float, ...]
 
 EPS = 1e-9
 SPLITS = 4           # pieces of a neighbour's data age paired with this robot's path
@@ -54,6 +55,8 @@ MOVING_PAD = 0.3     # rad, a moving neighbour's bearing counts as this much nea
 _STILL = ((0.0,),) * TRAIL_ROWS     # the trail of a robot that has not moved
 _BLIND = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)       # no line of sight (needed only with a trail)
 _NO_MOTION = (0.0,) * 8     # a split over which the robot did not move (_own_share)
+NO_GAPS = (math.inf, math.inf, math.inf)       # fold_hazard's gaps before any hazard
+FLOOR_PAD = 1e-6     # m, neighbour_floor's bounds are this much looser than rounding needs
 
 
 def neighbour_hazard(speed: float, turn: float, age: float, trail: float, a: float,
@@ -144,10 +147,7 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
         if k + 1 < splits and trail[9][k] != 0.0:
             continue    # the next split dominates it (trail_motion)
         t = max(age * (k + 1) / splits, 0.0)
-        # travel: its wheels within a ramp of the command it reported for the lag, then
-        # its speed grown by at most up since (or, more loosely, the ramp all along)
-        grow = min(top_speed * t, speed * t + min(half_accel * t * t + accel_lag * t,
-                                                  half_up * t * t + accel_lag2))
+        grow = _grow(t, speed, top_speed, half_accel, half_up, accel_lag, accel_lag2)
         rho = math.inf
         if half_base > 0.0:
             t2 = t * t
@@ -169,6 +169,44 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
         if a + rho + path > reach:
             reach = max(reach, a + rho + _own_share(motion, sx, sy, ex, ey, off, rho))
     return around, reach, rho_age
+
+
+def _grow(t: float, speed: float, top_speed: float, half_accel: float, half_up: float,
+          accel_lag: float, accel_lag2: float) -> float:
+    """How far [m] a neighbour last reported at ``speed`` [m/s] (>= 0) can have travelled
+    all round ``t`` [s] (>= 0) later (:func:`_paired`; half its ramp and speed-up, its ramp
+    times the lag and that times the lag again): its wheels within a ramp of the command it
+    reported for the lag, then its speed grown by at most its speed-up since (or, more
+    loosely, the ramp all along), and never faster than ``top_speed``."""
+    return min(top_speed * t, speed * t + min(half_accel * t * t + accel_lag * t,
+                                              half_up * t * t + accel_lag2))
+
+
+def neighbour_floor(rel_x: float, rel_y: float, speed: float, age: float, path: float,
+                    a: float, accel: float, top_speed: float, staleness: float,
+                    speed_up: float, lag: float) -> tuple[float, float]:
+    """(floor, top) [m] for a neighbour (arguments as :func:`neighbour_radii`, ``path``
+    [m] this robot's path since the stamp: its trail's first value): at most
+    the free distance this robot owns toward the disc :func:`neighbour_radii` gives it,
+    whichever form that takes, and at least its claim's half radius; (-inf, inf) where it
+    is silent or its wheels change speed at once (no bound: the disc is cheap there).
+
+    Heard from, its claim is at most a + how far it can have travelled all round by now
+    + this robot's path since the stamp (:func:`_paired`, at the age), and the claim's
+    disc leaves this robot half the distance to the reported position beyond that
+    (:func:`neighbour_radii` takes the claim that much smaller as its centre comes nearer
+    along the report's segment); behind it, the stop strip leaves more free distance,
+    never less (:func:`_ahead`). A few operations: for leaving out the discs that cannot
+    bind (:func:`can_bind`) before computing them."""
+    if age > staleness or math.isinf(accel):
+        return -math.inf, math.inf
+    age, speed = max(age, 0.0), abs(speed)
+    up = min(speed_up, accel)
+    accel_lag = accel * lag
+    top = (a + _grow(age, speed, top_speed, 0.5 * accel, 0.5 * up, accel_lag,
+                     accel_lag * lag) + path + FLOOR_PAD)
+    dist = math.sqrt(rel_x * rel_x + rel_y * rel_y)
+    return 0.5 * (dist - top) - FLOOR_PAD, top
 
 
 def trail_motion(trail: TrailRows) -> None:
@@ -575,8 +613,31 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     room: the least free distance [m] ahead or behind, margin included, over the cosine of
     the hazard's angle, of the hazards the robot is outside of (inf: none near). A disc the
     robot is already inside (a neighbour's that grew round it as its data aged or it died)
-    leaves no room to keep; not turning would never take the robot out of it."""
-    room = math.inf
+    leaves no room to keep; not turning would never take the robot out of it.
+
+    The same in pieces, for a caller that skips the hazards that cannot bind
+    (:func:`can_bind`): :func:`limit_frame`, :func:`fold_hazard` for each hazard, in any
+    order, and :func:`frame_limits`."""
+    frame = limit_frame(theta, v_now, u_now, accel, period, latency, turn_rate, wheel_base,
+                        top_speed, margin, turn_up)
+    gaps = NO_GAPS
+    for h in range(len(haz_r)):
+        gaps = fold_hazard(gaps, frame, haz_x[h] - x, haz_y[h] - y, haz_r[h], haz_half[h],
+                           haz_moving[h])
+    return frame_limits(gaps, frame)
+
+
+def limit_frame(theta: float, v_now: float, u_now: float, accel: float, period: float,
+                latency: float, turn_rate: float, wheel_base: float,
+                top_speed: float = math.inf, margin: float = 0.0,
+                turn_up: float = math.inf) -> Frame:
+    """What :func:`speed_limits` measures every hazard against (its arguments but the
+    hazards and the position), as plain floats: the unit vector along the middle of the
+    headings swept while stopping; the cosine, sine and whether-all (1.0 or 0.0) of the
+    sweep's half-width for a static hazard and for a moving one; the free distance [m]
+    beyond which a hazard is skipped; the margin [m]; then v_now, the speed [m/s] the
+    command may differ by in flight, latency, accel, period and the wheels' half
+    difference [m/s]."""
     reaction = period + latency
     ramp = 0.0 if math.isinf(accel) else accel * period   # m/s the speed may differ by in flight
     turn = 0.5 * abs(u_now) * wheel_base                 # m/s, the wheels' half difference
@@ -588,44 +649,76 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     spread = 0.5 * abs(sweep) + bend
     middle = theta + 0.5 * sweep
     reach = (top_speed + ramp) * latency + stopping(top_speed, accel, period, turn)
-    head_x, head_y = math.cos(middle), math.sin(middle)
     # the pads as cosine and sine; a pad of half a turn or more takes in every bearing
-    still = (math.cos(spread), math.sin(spread), spread >= math.pi)
-    moving = (math.cos(spread + MOVING_PAD), math.sin(spread + MOVING_PAD),
-              spread + MOVING_PAD >= math.pi)
-    gap_fwd = gap_bwd = math.inf       # m, the least free distance less margin, over c
-    for h in range(len(haz_r)):
-        dx, dy = haz_x[h] - x, haz_y[h] - y
-        d = math.sqrt(dx * dx + dy * dy)
-        free = min(d - haz_r[h], 0.5 * (d - haz_half[h]))
-        if free >= reach + margin:   # cannot hold the robot below its top speed
-            continue
-        c_fwd = c_bwd = 1.0          # on the robot
-        if d >= EPS:
-            # cosine and sine of the bearing's angle from the heading
-            along, across = (dx * head_x + dy * head_y) / d, abs(dx * head_y - dy * head_x) / d
-            pad = moving if haz_moving[h] != 0.0 else still
-            c_fwd, c_bwd = _cosine(along, across, pad), _cosine(-along, across, pad)
-        if c_fwd > EPS:
-            gap_fwd = min(gap_fwd, (free - margin) / c_fwd)
-        if c_bwd > EPS:
-            gap_bwd = min(gap_bwd, (free - margin) / c_bwd)
-        c = max(c_fwd, c_bwd)
-        if free > 0.0 and c > EPS:
-            room = min(room, free / c)
-    # braking_speed grows with the free distance: the nearest hazard each way sets the limit
-    fwd = _limit(gap_fwd, max(v_now, 0.0), ramp, latency, accel, period, turn)
-    bwd = _limit(gap_bwd, max(-v_now, 0.0), ramp, latency, accel, period, turn)
-    return fwd, bwd, room
+    moving = spread + MOVING_PAD
+    return (math.cos(middle), math.sin(middle),
+            math.cos(spread), math.sin(spread), 1.0 if spread >= math.pi else 0.0,
+            math.cos(moving), math.sin(moving), 1.0 if moving >= math.pi else 0.0,
+            reach + margin, margin, v_now, ramp, latency, accel, period, turn)
 
 
-def _cosine(along: float, across: float, pad: tuple[float, float, bool]) -> float:
+def fold_hazard(gaps: tuple[float, float, float], frame: Frame, dx: float, dy: float,
+                radius: float, half: float, moving: float) -> tuple[float, float, float]:
+    """``gaps`` (the least free distance [m] less the margin, over the cosine, ahead and
+    behind, and the room: :func:`speed_limits`; :data:`NO_GAPS` before any hazard) with
+    one more hazard, centred (``dx``, ``dy``) [m] from the robot, its exclusion radii
+    ``radius`` and ``half`` [m], ``moving`` 1.0 or 0.0 (:func:`speed_limits`), measured
+    in ``frame`` (:func:`limit_frame`)."""
+    d = math.sqrt(dx * dx + dy * dy)
+    free = min(d - radius, 0.5 * (d - half))
+    if free >= frame[8]:         # cannot hold the robot below its top speed
+        return gaps
+    gap_fwd, gap_bwd, room = gaps
+    margin = frame[9]
+    c_fwd = c_bwd = 1.0          # on the robot
+    if d >= EPS:
+        # cosine and sine of the bearing's angle from the heading
+        along = (dx * frame[0] + dy * frame[1]) / d
+        across = abs(dx * frame[1] - dy * frame[0]) / d
+        pad = 5 if moving != 0.0 else 2
+        c_fwd = _cosine(along, across, frame[pad], frame[pad + 1], frame[pad + 2])
+        c_bwd = _cosine(-along, across, frame[pad], frame[pad + 1], frame[pad + 2])
+    if c_fwd > EPS:
+        gap_fwd = min(gap_fwd, (free - margin) / c_fwd)
+    if c_bwd > EPS:
+        gap_bwd = min(gap_bwd, (free - margin) / c_bwd)
+    c = max(c_fwd, c_bwd)
+    if free > 0.0 and c > EPS:
+        room = min(room, free / c)
+    return gap_fwd, gap_bwd, room
+
+
+def can_bind(gaps: tuple[float, float, float], frame: Frame, floor: float) -> bool:
+    """Whether a hazard this robot owns at least ``floor`` [m] of free distance toward
+    can change ``gaps`` (:func:`fold_hazard`): a cosine is at most 1, so beyond the margin
+    its gaps are at least floor less the margin and its room at least floor. A hazard
+    that cannot is left out without changing the limits, in any order of the hazards."""
+    if floor >= frame[8]:
+        return False             # fold_hazard skips it
+    margin = frame[9]
+    return (floor < margin or floor - margin < gaps[0] or floor - margin < gaps[1]
+            or floor < gaps[2])
+
+
+def frame_limits(gaps: tuple[float, float, float], frame: Frame
+                 ) -> tuple[float, float, float]:
+    """(forward, backward, room) of :func:`speed_limits` from its ``gaps``, measured in
+    ``frame`` (:func:`limit_frame`): braking_speed grows with the free distance, so the
+    nearest hazard each way sets the limit."""
+    v_now, ramp, latency, accel, period, turn = (frame[10], frame[11], frame[12],
+                                                 frame[13], frame[14], frame[15])
+    fwd = _limit(gaps[0], max(v_now, 0.0), ramp, latency, accel, period, turn)
+    bwd = _limit(gaps[1], max(-v_now, 0.0), ramp, latency, accel, period, turn)
+    return fwd, bwd, gaps[2]
+
+
+def _cosine(along: float, across: float, cos_pad: float, sin_pad: float,
+            everywhere: float) -> float:
     """The weight of a hazard whose bearing makes an angle of cosine ``along`` and sine
     ``across`` (>= 0) with the heading, the robot sweeping the headings within an angle
-    ``pad`` of it (its cosine, sine, and whether it is half a turn or more): 1 within the
+    ``pad`` of it (its cosine, sine, and 1.0 where it is half a turn or more): 1 within the
     sweep, the cosine of the angle beyond it otherwise (<= 0 beyond 90 degrees)."""
-    cos_pad, sin_pad, everywhere = pad
-    if everywhere or along >= cos_pad:
+    if everywhere != 0.0 or along >= cos_pad:
         return 1.0
     return along * cos_pad + across * sin_pad
 

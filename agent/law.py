@@ -57,12 +57,13 @@ from agent.avoidance import (
     way_closed,
 )
 from agent.config import ControlParams, RobotParams
-from agent.governor import braking_speed, slip_margin, speed_limits, turn_limit
+from agent.governor import braking_speed, limit_frame, slip_margin, turn_limit
 from agent.kinematics import TWO_PI, body_velocity, wheel_command, wrap_angle
 from common.vocabulary import Mode
 
 if TYPE_CHECKING:
     from agent.avoidance import FloatSeq
+    from agent.governor import Frame
 
 TRACK, AVOID, ROTATE = int(Mode.TRACK), int(Mode.AVOID), int(Mode.ROTATE)
 
@@ -155,9 +156,8 @@ def moved_estimate(mem: LawMemory, dx: float, dy: float) -> LawMemory:
 def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_vx: float,
              ref_vy: float, nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_held: FloatSeq,
              nbr_grow: FloatSeq, obs_x: FloatSeq, obs_y: FloatSeq,
-             obs_r: FloatSeq, haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq,
-             haz_half: FloatSeq, haz_moving: FloatSeq, mem: LawMemory, p: LawParams,
-             dt: float) -> tuple[float, float, int, float, LawMemory]:
+             obs_r: FloatSeq, limits: tuple[float, float, float], mem: LawMemory,
+             p: LawParams, dt: float) -> tuple[float, float, int, float, LawMemory]:
     """One period for one robot: (v [m/s], u [rad/s], mode (a :class:`Mode` value), the
     speed [m/s] the governor allowed when it lowered the command (inf: it did not), memory).
 
@@ -169,10 +169,10 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     (its half radius less a, below 0 taken as 0; 0 without the governor:
     agent.governor.neighbour_radii); ``obs_x``, ``obs_y``,
     ``obs_r``
-    the obstacles in range (centre and radius); ``haz_*`` the governor's hazards (centre,
-    exclusion radii [m] of the whole and of the half free distance, moving or not:
-    :mod:`agent.governor`); ``dt`` [s]
-    the time since the last step.
+    the obstacles in range (centre and radius); ``limits`` the safety governor's
+    (forward, backward) speed limits [m/s] and room [m] among its hazards (agent.governor
+    .frame_limits in the frame of :func:`governor_frame`; read only with the governor
+    on); ``dt`` [s] the time since the last step.
     """
     # TRACK for everyone: error and its finite-difference heading rate (Assumption 2)
     ex, ey = x - ref_x, y - ref_y
@@ -323,13 +323,11 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
     u = min(max(turn + ff, -p.u_max), p.u_max)
 
     # the safety governor: no faster toward a hazard than lets the robot stop before it
-    v_now, u_now = body_velocity(TWO_PI * mem.wheel_r, TWO_PI * mem.wheel_l, p.wheel_radius,
-                                 p.wheel_base)
+    v_now, u_now = last_velocity(mem, p)
     top = TWO_PI * p.wheel_radius * p.speed_limit      # the wheels' own limit [m/s]
     fwd = bwd = math.inf
     if p.governor:
-        fwd, bwd, room = governor_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r,
-                                         haz_half, haz_moving, p, dt)
+        fwd, bwd, room = limits
         u_cap = turn_limit(room, p.slip, p.accel, max(dt, p.watchdog) + p.latency,
                            p.wheel_base)
         u = min(max(u, -u_cap), u_cap)
@@ -370,19 +368,32 @@ def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_v
                                            radius, wr, wl, passing_side)
 
 
-def governor_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
-                    haz_x: FloatSeq, haz_y: FloatSeq, haz_r: FloatSeq, haz_half: FloatSeq,
-                    haz_moving: FloatSeq, p: LawParams, dt: float
-                    ) -> tuple[float, float, float]:
-    """The safety governor's (forward, backward) speed limits [m/s] and room [m] for the
-    robot of :func:`law_step` (agent.governor.speed_limits with this law's robot: a
-    command held for a period, or the drivers' watchdog should the agent die, then the
-    drive latency; its wheels' top speed; room kept for the drift of a turn on the spot
-    on slipping wheels)."""
-    return speed_limits(x, y, theta, v_now, u_now, haz_x, haz_y, haz_r, haz_half,
-                        haz_moving, p.accel, max(dt, p.watchdog), p.latency, p.u_max,
-                        p.wheel_base, TWO_PI * p.wheel_radius * p.speed_limit,
-                        slip_margin(p.slip, p.wheel_base), p.turn_up)
+def governor_frame(theta: float, v_now: float, u_now: float, p: LawParams, dt: float
+                   ) -> Frame:
+    """The frame (agent.governor.limit_frame) the safety governor measures its hazards in
+    for the robot of :func:`law_step`, heading ``theta`` [rad] and moving at (``v_now``
+    [m/s], ``u_now`` [rad/s]), its last command: a command held for a period ``dt`` [s],
+    or the drivers' watchdog should the agent die, then the drive latency; its wheels'
+    top speed; room kept for the drift of a turn on the spot on slipping wheels. The
+    caller folds the hazards into it (agent.governor.fold_hazard) and hands law_step the
+    limits (agent.governor.frame_limits)."""
+    return limit_frame(theta, v_now, u_now, p.accel, max(dt, p.watchdog), p.latency, p.u_max,
+                       p.wheel_base, TWO_PI * p.wheel_radius * p.speed_limit,
+                       slip_margin(p.slip, p.wheel_base), p.turn_up)
+
+
+def last_velocity(mem: LawMemory, p: LawParams) -> tuple[float, float]:
+    """(v [m/s], u [rad/s]) of the robot's last command, its wheels' set-points in ``mem``."""
+    return body_velocity(TWO_PI * mem.wheel_r, TWO_PI * mem.wheel_l, p.wheel_radius,
+                         p.wheel_base)
+
+
+def may_pass(d: float, grow: float, p: LawParams) -> bool:
+    """Whether TRACK can pass (A13) a neighbour ``d`` [m] away whose governor disc is at
+    most ``grow`` [m] wider than a: :func:`in_the_way`, as :func:`law_step` calls it,
+    leaves out every neighbour farther than the widest of its reaches plus the growth. A
+    caller need not compute the disc of a neighbour it cannot pass."""
+    return p.sidestep and d < max(p.c, p.b + p.hysteresis) + grow
 
 
 def in_the_way(heading: float, x: float, y: float, nbr_x: FloatSeq, nbr_y: FloatSeq,

@@ -28,9 +28,27 @@ import numpy as np
 
 from agent.config import CONTROL_PARAMS, commitment, disc_args
 from agent.formation import Formation
-from agent.governor import SPLITS, neighbour_radii, silent_radius
+from agent.governor import (
+    NO_GAPS,
+    SPLITS,
+    can_bind,
+    fold_hazard,
+    frame_limits,
+    neighbour_floor,
+    neighbour_radii,
+    silent_radius,
+)
 from agent.kinematics import TWO_PI, body_velocity, wheel_command
-from agent.law import LawMemory, LawParams, law_step, moved_estimate, pair_active
+from agent.law import (
+    LawMemory,
+    LawParams,
+    governor_frame,
+    last_velocity,
+    law_step,
+    may_pass,
+    moved_estimate,
+    pair_active,
+)
 from agent.loop import Clock
 from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry, Pose
@@ -370,21 +388,20 @@ class Agent:
         rx, ry, rvx, rvy = formation.point(0, now_w - mission.epoch)
         self.reference = (rx, ry)
         near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
+        dt = self.s.control.period if self._last_law is None else now_m - self._last_law
+        dt = max(dt, 1e-6)
+        self._last_law = now_m
         halves: dict[int, float] = {}
-        hazards = (self._hazards(pose, neighbours, obs_x, obs_y, obs_r, len(near.stale_x),
-                                 now_w, halves)
-                   if self.s.control.governor else ([], [], [], [], []))
+        limits = (self._limits(pose, neighbours, near, obs_x, obs_y, obs_r, now_w, dt, halves)
+                  if self.s.control.governor else NO_GAPS)
         a = self.s.control.a
         grow = [halves.get(rid, a) - a for rid in near.fresh_id]
-        dt = self.s.control.period if self._last_law is None else now_m - self._last_law
-        self._last_law = now_m
         per_pair = self._law_params.pair_hysteresis
         held = [1.0 if rid in self._held else 0.0 for rid in near.fresh_id] if per_pair \
             else [0.0] * len(near.fresh_x)
         v, u, mode, governed, self.memory = law_step(
             *pose, rx, ry, rvx, rvy, near.fresh_x, near.fresh_y, held, grow, obs_x, obs_y,
-            obs_r,
-            *hazards, self.memory, self._law_params, max(dt, 1e-6))
+            obs_r, limits, self.memory, self._law_params, dt)
         if per_pair:       # the pairs' memory, as the law applied it
             b, h = self.s.control.b, self.s.control.hysteresis
             self._held = set()
@@ -426,28 +443,38 @@ class Agent:
                 log.info("robot %d progressing again", self.s.robot_id)
             self.deadlock = None
 
-    def _hazards(self, pose: tuple[float, float, float],
-                 neighbours: Mapping[int, Received[StateMsg]], obs_x: list[float],
-                 obs_y: list[float], obs_r: list[float], n_stale: int, now_w: float,
-                 halves: dict[int, float] | None = None
-                 ) -> tuple[list[float], list[float], list[float], list[float], list[float]]:
-        """The safety governor's hazards (agent.governor) around ``pose``: every neighbour
-        heard from where it can be by now given its data's age, and the detected
-        obstacles grown by a (``obs_*`` without their last ``n_stale`` entries: stale
-        robots, which are among the neighbours); with a pose source, every radius also grown
-        by this robot's position uncertainty. ``halves``, if given, gets the half radius [m]
-        of each neighbour's claim, which the law passes round (A13), by robot id."""
+    def _limits(self, pose: tuple[float, float, float],
+                neighbours: Mapping[int, Received[StateMsg]], near: InRange,
+                obs_x: list[float], obs_y: list[float], obs_r: list[float], now_w: float,
+                dt: float, halves: dict[int, float]) -> tuple[float, float, float]:
+        """The safety governor's (forward, backward) speed limits [m/s] and room [m] at
+        ``pose`` (agent.governor.frame_limits), ``dt`` [s] after the last law step, among
+        its hazards (agent.governor): the detected obstacles grown by a (``obs_*`` but for
+        the stale robots among ``near``'s, which are among the neighbours) and every
+        neighbour heard from where it can be by now given its data's age; with a pose
+        source, every radius also grown by this robot's position uncertainty.
+
+        The nearest first, by a cheap bound of the free distance toward each neighbour's
+        disc (agent.governor.neighbour_floor); a disc is computed only where it can bind
+        (agent.governor.can_bind) or the law can pass the neighbour (agent.law.may_pass):
+        the limits are those of every disc. ``halves`` gets the half radius [m] of each
+        neighbour's claim, which the law passes round (A13), by robot id; or, where it
+        cannot pass the neighbour, a bound of it."""
         s = self.s
         grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
         half_base, disc = self._disc
-        staleness = s.timeouts.staleness
+        a, staleness = disc[0], s.timeouts.staleness
         x, y, me = pose[0], pose[1], s.robot_id
+        frame = governor_frame(pose[2], *last_velocity(self.memory, self._law_params),
+                               self._law_params, dt)
+        gaps = NO_GAPS
+        for k in range(len(obs_r) - len(near.stale_x)):
+            gaps = fold_hazard(gaps, frame, obs_x[k] - x, obs_y[k] - y, obs_r[k] + a + grow,
+                               -math.inf, 0.0)
+        law_xy = {rid: (nx, ny) for rid, nx, ny in zip(near.fresh_id, near.fresh_x,
+                                                        near.fresh_y)}
         reach = s.sensing_range + disc[2] * staleness
-        hx: list[float] = []
-        hy: list[float] = []
-        hr: list[float] = []
-        hh: list[float] = []
-        hm: list[float] = []
+        ahead = []
         for rid, rec in neighbours.items():
             m = rec.msg
             dx, dy = m.x - x, m.y - y
@@ -455,23 +482,32 @@ class Agent:
                 continue
             age = now_w - m.stamp
             moved = self.trail.splits(m.stamp, age, SPLITS)
+            floor, top = neighbour_floor(-dx, -dy, m.v, age, moved[0][0], a, disc[1], disc[2],
+                                         staleness, *self._commit[:2])
+            ahead.append((floor - 0.5 * grow, rid, -dx, -dy, age, moved, top + grow))
+        ahead.sort()                     # by the floor (then by id: the ids differ)
+        for floor, rid, rel_x, rel_y, age, moved, top in ahead:
+            if not can_bind(gaps, frame, floor) and not self._may_pass(law_xy.get(rid), pose,
+                                                                      top - a):
+                halves[rid] = top
+                continue
+            m = neighbours[rid].msg
             full, half, east, north, claim = neighbour_radii(
-                -dx, -dy, m.theta, m.v, m.u, age, moved, disc[0], disc[1], half_base,
+                rel_x, rel_y, m.theta, m.v, m.u, age, moved, a, disc[1], half_base,
                 *disc[2:], *self._commit)
-            hx.append(m.x + east)
-            hy.append(m.y + north)
-            hr.append(full + grow)
-            hh.append(half + grow)
-            if halves is not None:
-                halves[rid] = claim + grow
-            hm.append(1.0 if age <= staleness else 0.0)
-        for k in range(len(obs_r) - n_stale):
-            hx.append(obs_x[k])
-            hy.append(obs_y[k])
-            hr.append(obs_r[k] + s.control.a + grow)
-            hh.append(-math.inf)
-            hm.append(0.0)
-        return hx, hy, hr, hh, hm
+            gaps = fold_hazard(gaps, frame, m.x + east - x, m.y + north - y, full + grow,
+                               half + grow, 1.0 if age <= staleness else 0.0)
+            halves[rid] = claim + grow
+        return frame_limits(gaps, frame)
+
+    def _may_pass(self, at: tuple[float, float] | None, pose: tuple[float, float, float],
+                  grow: float) -> bool:
+        """Whether the law can pass (A13) a neighbour it sees ``at`` (x, y) [m] (None: it
+        does not see it) whose disc is at most ``grow`` [m] wider than a."""
+        if at is None:
+            return False
+        dx, dy = at[0] - pose[0], at[1] - pose[1]
+        return may_pass(math.sqrt(dx * dx + dy * dy), grow, self._law_params)
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],

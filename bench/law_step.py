@@ -15,7 +15,8 @@ import time
 import numpy as np
 
 from agent.config import ControlParams, RobotParams
-from agent.law import LawMemory, LawParams, law_step
+from agent.governor import NO_GAPS, fold_hazard, frame_limits
+from agent.law import LawMemory, LawParams, governor_frame, last_velocity, law_step
 
 POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0, 2.0, 0.0)   # m, rad; reference m and m/s
 NBR_X, NBR_Y, NBR_H = [2.0, 3.0, -1.0], [1.0, -2.0, 4.0], [1.0, 0.0, 0.0]
@@ -30,10 +31,19 @@ HAZ_M = [1.0] * len(NBR_X) + [0.0] * len(OBS_R)
 
 
 def law(p: ControlParams):
+    """The governor's limits among the hazards (agent.law.governor_frame and
+    agent.governor.fold_hazard, as an agent folds them) and the law step."""
     lp = LawParams.of(p, RobotParams())
-    return LawMemory(), lambda mem: law_step(*POSE, *REF, NBR_X, NBR_Y, NBR_H, NBR_G, OBS_X,
-                                             OBS_Y, OBS_R, HAZ_X, HAZ_Y, HAZ_R, HAZ_S, HAZ_M,
-                                             mem, lp, p.period)[4]
+
+    def step(mem: LawMemory) -> LawMemory:
+        frame = governor_frame(POSE[2], *last_velocity(mem, lp), lp, p.period)
+        gaps = NO_GAPS
+        for h in range(len(HAZ_R)):
+            gaps = fold_hazard(gaps, frame, HAZ_X[h] - POSE[0], HAZ_Y[h] - POSE[1], HAZ_R[h],
+                               HAZ_S[h], HAZ_M[h])
+        return law_step(*POSE, *REF, NBR_X, NBR_Y, NBR_H, NBR_G, OBS_X, OBS_Y, OBS_R,
+                        frame_limits(gaps, frame), mem, lp, p.period)[4]
+    return LawMemory(), step
 
 
 def median_us(setup, p: ControlParams, steps: int, sweep: np.ndarray | None) -> float:

@@ -17,9 +17,28 @@ import math
 import numpy as np
 
 from agent.formation import reference_point
-from agent.governor import SPLITS, TRAIL_ROWS, neighbour_radii, silent_radius, trail_motion
+from agent.governor import (
+    NO_GAPS,
+    SPLITS,
+    TRAIL_ROWS,
+    can_bind,
+    fold_hazard,
+    frame_limits,
+    neighbour_floor,
+    neighbour_radii,
+    silent_radius,
+    trail_motion,
+)
 from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
-from agent.law import LawMemory, LawParams, law_step, pair_active
+from agent.law import (
+    LawMemory,
+    LawParams,
+    governor_frame,
+    last_velocity,
+    law_step,
+    may_pass,
+    pair_active,
+)
 from firmware_sim.world_step import FRESH, NONE, STALE, detect
 
 prange = range   # numba.prange when compiled
@@ -151,6 +170,29 @@ def _watch(i: int, x: float, y: float, m: int, k: int, nbr_d: np.ndarray,
     return max(w + 1, wk + 1)
 
 
+def own_motion(path: np.ndarray, step: int, i: int, age: float, period: float,
+               trail: np.ndarray) -> None:
+    """Fill ``trail`` (agent.governor.neighbour_radii's rows) with robot ``i``'s motion
+    over each split of the last ``age`` [s], from its path (``path``: the ring of the
+    robots' (x, y, path length) of the last periods, ``step`` the current period's):
+    from the period at or before each split's start, and at or after its end."""
+    ring = len(path)
+    now = path[step % ring, i]
+    for piece in range(SPLITS):
+        since = age * (SPLITS - piece) / SPLITS
+        ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
+        start = path[(step - ago) % ring, i]
+        ago = min(max(int(math.floor((since - age / SPLITS) / period + 1e-9)), 0), ring - 1)
+        end = path[(step - ago) % ring, i]
+        trail[0, piece] = now[2] - start[2]
+        trail[1, piece] = now[2] - end[2]
+        trail[2, piece] = now[0] - start[0]
+        trail[3, piece] = now[1] - start[1]
+        trail[4, piece] = now[0] - end[0]
+        trail[5, piece] = now[1] - end[1]
+    trail_motion(trail)
+
+
 def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np.ndarray,
                    view: np.ndarray, path: np.ndarray, mem_f: np.ndarray,
                    mem_i: np.ndarray, held: np.ndarray,
@@ -177,8 +219,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     nbr_g = np.empty(cap)             # m, each neighbour's governor disc beyond a
     o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
     o_k = np.empty(cap, np.int64)
-    h_x, h_y, h_r = np.empty(2 * cap), np.empty(2 * cap), np.empty(2 * cap)
-    h_h, h_m = np.empty(2 * cap), np.empty(2 * cap)
+    c_floor, c_q = np.empty(cap), np.empty(cap, np.int64)   # the neighbours with a disc
     trail = np.empty((TRAIL_ROWS, SPLITS))    # agent.governor.neighbour_radii's own motion
     for i in range(lo, hi):
         x, y = own[i, 0], own[i, 1]
@@ -189,54 +230,58 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         need = max(need, m, k)
         if m > cap or k > cap:
             continue
-        # the governor's hazards: neighbours where they can be by now given their data's
-        # age, and the detected obstacles; all grown by the robot's own position
-        # uncertainty (own[:, 3], with a pose source). None with the governor off: the law
-        # reads them for it alone
+        if not truth:
+            k = detect(i, step, seed, det_noise, det_dropout, k, o_x, o_y, o_r, o_k)
+        mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
+                        mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4], mem_f[i, 5],
+                        mem_f[i, 6], mem_i[i, 3])
+        # the governor's hazards: the detected obstacles, and neighbours where they can be
+        # by now given their data's age; all grown by the robot's own position uncertainty
+        # (own[:, 3], with a pose source). The nearest neighbours first, by a bound of the
+        # free distance toward their discs; a disc is computed only where it can bind or
+        # the law can pass the neighbour (as agent.node.Agent._limits). None with the
+        # governor off: the law reads the limits for it alone
         grow = own[i, 3] if own.shape[1] > 3 else 0.0
-        n_h = 0
-        trails_age = math.nan
+        v_now, u_now = last_velocity(mem, p)
+        frame = governor_frame(own[i, 2], v_now, u_now, p, period)
+        gaps = NO_GAPS
+        n_c = 0
         nbr_g[:m] = 0.0
+        for q in range(k if p.governor else 0):
+            gaps = fold_hazard(gaps, frame, o_x[q] - x, o_y[q] - y, o_r[q] + a + grow,
+                               -math.inf, 0.0)
         for q in range(m if p.governor else 0):
             j = nbr_j[q]
             if not truth and seen[j, 2] == NONE:
                 continue
             age = t - view[j, 5]
-            # this robot's motion over each split of the age: from the period at or before
-            # its start, and at or after its end (neighbours heard in the same period share
-            # it)
-            if age != trails_age:
+            since = min(max(int(math.ceil(age / period - 1e-9)), 0), ring - 1)
+            floor, top = neighbour_floor(x - view[j, 0], y - view[j, 1], view[j, 3], age,
+                                         path[step % ring, i, 2]
+                                         - path[(step - since) % ring, i, 2], a, p.accel,
+                                         top_speed, staleness, p.speed_up, lag)
+            c_floor[n_c], c_q[n_c] = floor - 0.5 * grow, q
+            nbr_g[q] = top + grow - a
+            n_c += 1
+        trails_age = math.nan
+        for c in np.argsort(c_floor[:n_c]):
+            q = c_q[c]
+            j = nbr_j[q]
+            dx, dy = nbr_x[q] - x, nbr_y[q] - y
+            if not can_bind(gaps, frame, c_floor[c]) and not may_pass(
+                    math.sqrt(dx * dx + dy * dy), nbr_g[q], p):
+                continue
+            age = t - view[j, 5]
+            if age != trails_age:       # neighbours heard in the same period share it
                 trails_age = age
-                now = path[step % ring, i]
-                for piece in range(SPLITS):
-                    since = age * (SPLITS - piece) / SPLITS
-                    ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
-                    start = path[(step - ago) % ring, i]
-                    ago = min(max(int(math.floor((since - age / SPLITS) / period + 1e-9)),
-                                  0), ring - 1)
-                    end = path[(step - ago) % ring, i]
-                    trail[0, piece] = now[2] - start[2]
-                    trail[1, piece] = now[2] - end[2]
-                    trail[2, piece] = now[0] - start[0]
-                    trail[3, piece] = now[1] - start[1]
-                    trail[4, piece] = now[0] - end[0]
-                    trail[5, piece] = now[1] - end[1]
-                trail_motion(trail)
+                own_motion(path, step, i, age, period, trail)
             full, half, east, north, claim = neighbour_radii(
                 x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3], view[j, 4], age,
                 trail, a, p.accel, 0.5 * p.wheel_base, top_speed, staleness, stop_time,
                 wheel_top, p.speed_up, lag, p.turn_up)
-            h_r[n_h], h_h[n_h] = full + grow, half + grow
+            gaps = fold_hazard(gaps, frame, view[j, 0] + east - x, view[j, 1] + north - y,
+                               full + grow, half + grow, 1.0 if age <= staleness else 0.0)
             nbr_g[q] = claim + grow - a
-            h_x[n_h], h_y[n_h] = view[j, 0] + east, view[j, 1] + north
-            h_m[n_h] = age <= staleness
-            n_h += 1
-        if not truth:
-            k = detect(i, step, seed, det_noise, det_dropout, k, o_x, o_y, o_r, o_k)
-        for q in range(k if p.governor else 0):
-            h_x[n_h], h_y[n_h], h_r[n_h], h_m[n_h] = o_x[q], o_y[q], o_r[q] + a + grow, 0.0
-            h_h[n_h] = -math.inf
-            n_h += 1
         if not truth:
             # stale neighbours become static obstacles; unheard ones are unknown
             fresh = 0
@@ -261,9 +306,6 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 continue
         rx, ry, rvx, rvy = reference_point(offsets[i, 0], offsets[i, 1], motion[0],
                                            motion[1], motion[2], motion[3], motion[4], t)
-        mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
-                        mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4], mem_f[i, 5],
-                        mem_f[i, 6], mem_i[i, 3])
         # the pairs active last period (per-pair hysteresis); held lists are short
         for q in range(m):
             nbr_h[q] = 0.0
@@ -275,8 +317,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         v, u, mode, allowed, new = law_step(x, y, own[i, 2], rx, ry, rvx, rvy, nbr_x[:m],
                                             nbr_y[:m], nbr_h[:m], nbr_g[:m], o_x[:k],
                                             o_y[:k], o_r[:k],
-                                            h_x[:n_h], h_y[:n_h], h_r[:n_h], h_h[:n_h],
-                                            h_m[:n_h], mem, p, period)
+                                            frame_limits(gaps, frame), mem, p, period)
         out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2], out_cmd[i, 3] = v, u, mode, allowed
         out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
         out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey

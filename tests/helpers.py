@@ -73,3 +73,27 @@ def judge_liveness(steal: float | None, missed: float = 0.0) -> None:
         pytest.xfail(f"an agent missed {missed:.1%} of the mission's periods (limit "
                      f"{MISSED_LIMIT:.0%}): safety held; liveness not judged on a machine "
                      f"that did not keep time")
+
+
+def governor_discs(monkeypatch: pytest.MonkeyPatch, agent, obstacles=None, now=None,
+                   dt: float = 0.02) -> tuple[list[tuple[float, ...]], dict[int, float]]:
+    """The hazards the agent's safety governor folds (agent.governor.fold_hazard) at its
+    pose among what it hears and the ``obstacles`` message, ``now`` (wall time [s],
+    default its clock's): (east, north, full, half, moving) per hazard, east and north
+    [m] from the agent, and the claims it hands the law by robot id."""
+    import agent.node as node
+    folded: list[tuple[float, ...]] = []
+    fold = node.fold_hazard
+
+    def spy(gaps, frame, dx, dy, radius, half, moving):
+        folded.append((dx, dy, radius, half, moving))
+        return fold(gaps, frame, dx, dy, radius, half, moving)
+
+    monkeypatch.setattr(node, "fold_hazard", spy)
+    now = agent.clock.wall() if now is None else now
+    pose, nbrs = agent.pose, agent.swarm.neighbours()
+    near, ox, oy, orad = agent._surroundings(pose, nbrs, obstacles, now)
+    halves: dict[int, float] = {}
+    agent._limits(pose, nbrs, near, ox, oy, orad, now, dt, halves)
+    monkeypatch.setattr(node, "fold_hazard", fold)
+    return folded, halves

@@ -11,7 +11,8 @@ from typing import NamedTuple
 import numpy as np
 
 from agent.config import ControlParams, RobotParams
-from agent.law import LawMemory, LawParams, law_step
+from agent.governor import NO_GAPS, fold_hazard, frame_limits
+from agent.law import LawMemory, LawParams, governor_frame, last_velocity, law_step
 from firmware_sim import compiled
 
 IMPLS = ("interpreted", "compiled")
@@ -55,14 +56,23 @@ def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None 
     grow = case.grow if case.grow is not None else [0.0] * len(case.nbrs)
     columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs], held, grow,
                [o[0] for o in case.obstacles], [o[1] for o in case.obstacles],
-               [o[2] for o in case.obstacles], [h[0] for h in case.hazards],
-               [h[1] for h in case.hazards], [h[2] for h in case.hazards],
-               [h[3] for h in case.hazards], [h[4] for h in case.hazards])
+               [o[2] for o in case.obstacles])
+    lp = LawParams.of(params, robot)
     law = law_step
     if IMPL == "compiled":            # arrays, as the batch simulator passes them
         law = compiled.kernels().law_step
         columns = tuple(np.array(c, dtype=float) for c in columns)
     v, u, mode, governed, memory = law(*case.pose, *case.ref, 0.0, 0.0, *columns,
-                                       mem, LawParams.of(params, robot),
+                                       limits(case, mem, lp, params.period), mem, lp,
                                        params.period)
     return Output([v], [u], [mode], memory, governed)
+
+
+def limits(case: Case, mem: LawMemory, lp: LawParams, dt: float) -> tuple[float, float, float]:
+    """The governor's limits among ``case``'s hazards, for the robot in ``mem``'s motion."""
+    frame = governor_frame(case.pose[2], *last_velocity(mem, lp), lp, dt)
+    gaps = NO_GAPS
+    for hx, hy, full, half, moving in case.hazards:
+        gaps = fold_hazard(gaps, frame, hx - case.pose[0], hy - case.pose[1], full, half,
+                           moving)
+    return frame_limits(gaps, frame)

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 from fakes import MirrorMotor, SharedSwarm
-from helpers import SimClock
+from helpers import SimClock, governor_discs
 
 from agent.config import ControlParams, RobotParams
 from agent.governor import SPLITS, neighbour_hazard
@@ -281,7 +281,7 @@ def test_a_cart_brakes_for_a_dead_robot_through_its_governor():
     assert agent.counters.summary()["governor_min_allowed"] < cart.v_wheel_max
 
 
-def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
+def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp(monkeypatch):
     """A robot reported still 0.3 s ago (older than a period, within the staleness limit),
     straight ahead of this agent: its shared disc is a, then what it can have travelled by
     each split of those 0.3 s and the path this agent drove toward it since the split
@@ -304,8 +304,7 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
         agent.tick()
     age, driven = clock.wall() - stamp, agent.odometry.pose[0] - x0
     assert driven > 0.3 and age == pytest.approx(0.3)
-    hx, hy, hr, hh, hm = agent._hazards(agent.odometry.pose, agent.swarm.neighbours(), [],
-                                        [], [], 0, clock.wall())
+    folded, _ = governor_discs(monkeypatch, agent)
     # reported still: it can only have sped up, its wheels a ramp off the report for the
     # lag (a period and the drive latency, A17)
     lag = agent.s.control.period + cart.drive_latency
@@ -316,8 +315,8 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp():
     paths = agent.trail.splits(stamp, age, SPLITS)[0]
     pairs = [travel(age * (k + 1) / SPLITS) + paths[k] for k in range(SPLITS)]
     assert pairs[0] == pytest.approx(travel(age / SPLITS) + driven, rel=1e-6)
-    assert hr == [-math.inf]
-    assert hh == [pytest.approx(agent.s.control.a + max(pairs), rel=1e-6)]
+    assert [h[2] for h in folded] == [-math.inf]
+    assert [h[3] for h in folded] == [pytest.approx(agent.s.control.a + max(pairs), rel=1e-6)]
 
 
 def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
@@ -330,20 +329,28 @@ def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
     seen: list[list[float]] = []
     halves: list[list[float]] = []
     claims: list[list[float]] = []
-    law, hazards = node.law_step, Agent._hazards
+    law, limits, fold = node.law_step, Agent._limits, node.fold_hazard
 
     def spy_law(*args):
         seen.append(list(args[10]))                  # nbr_grow
         return law(*args)
 
-    def spy_hazards(self, *args):
-        out = hazards(self, *args)
-        halves.append(out[3][:1])
+    def spy_fold(gaps, frame, dx, dy, radius, half, moving):
+        if moving:                                   # the neighbour's disc
+            halves.append([half])
+        return fold(gaps, frame, dx, dy, radius, half, moving)
+
+    def spy_limits(self, *args):
+        before = len(halves)
+        out = limits(self, *args)
+        if len(halves) == before:                    # its disc could not bind
+            halves.append([])
         claims.append(list(args[-1].values()))       # the halves it was handed
         return out
 
     monkeypatch.setattr(node, "law_step", spy_law)
-    monkeypatch.setattr(Agent, "_hazards", spy_hazards)
+    monkeypatch.setattr(node, "fold_hazard", spy_fold)
+    monkeypatch.setattr(Agent, "_limits", spy_limits)
     for governor in (True, False):
         seen.clear()
         halves.clear()
@@ -366,8 +373,9 @@ def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
                 [c[0] - agent.s.control.a for c in claims[1:]])
             assert max(g[0] for g in seen[1:]) > 0.0
             # behind the other robot as it drives off: the strip holds it less
-            assert any(h[0] < c[0] - 1e-6 for h, c in zip(halves[1:], claims[1:]))
-            assert all(h[0] <= c[0] + 1e-9 for h, c in zip(halves[1:], claims[1:]))
+            pairs = [(h[0], c[0]) for h, c in zip(halves[1:], claims[1:]) if h]
+            assert any(h < c - 1e-6 for h, c in pairs)
+            assert all(h <= c + 1e-9 for h, c in pairs) and len(pairs) > len(claims) // 2
         else:
             assert halves == [] and all(g == [0.0] for g in seen[1:])
 

@@ -9,11 +9,17 @@ from hypothesis import strategies as st
 
 from agent.governor import (
     MOVING_PAD,
+    NO_GAPS,
     SPLITS,
     _own_share,
     _paired,
     approach,
     braking_speed,
+    can_bind,
+    fold_hazard,
+    frame_limits,
+    limit_frame,
+    neighbour_floor,
     neighbour_hazard,
     neighbour_radii,
     silent_radius,
@@ -814,3 +820,90 @@ def test_turning_on_the_spot_with_slipping_wheels_never_drifts_into_a_hazard():
     assert turn_limit(0.1, 0.0, accel, reaction, base) == math.inf
     assert turn_limit(-0.01, slip, accel, reaction, base) == 0.0
     assert slip_margin(slip, base) == pytest.approx(0.1 * math.pi * 0.4)
+
+
+def _walk(lengths: list[float], turn: float) -> tuple[list[float], ...]:
+    """A trail (agent.trail) of a robot that walked the pieces ``lengths`` [m] (the stamp's
+    first), turning by ``turn`` [rad] between them."""
+    xs, ys, heading = [0.0], [0.0], 0.0
+    for d in lengths:
+        xs.append(xs[-1] + d * math.cos(heading))
+        ys.append(ys[-1] + d * math.sin(heading))
+        heading += turn
+    paths = [sum(lengths[k:]) for k in range(len(lengths) + 1)]
+    return with_motion(([paths[k] for k in range(SPLITS)], [paths[k + 1] for k in range(SPLITS)],
+                        [xs[-1] - xs[k] for k in range(SPLITS)],
+                        [ys[-1] - ys[k] for k in range(SPLITS)],
+                        [xs[-1] - xs[k + 1] for k in range(SPLITS)],
+                        [ys[-1] - ys[k + 1] for k in range(SPLITS)]))
+
+
+neighbour = st.tuples(st.floats(-9.0, 9.0), st.floats(-9.0, 9.0), st.floats(-4.0, 4.0),
+                      st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), st.floats(0.0, 0.6),
+                      st.lists(st.floats(0.0, 0.5), min_size=SPLITS, max_size=SPLITS),
+                      st.floats(-1.0, 1.0))
+
+
+@settings(max_examples=1000, deadline=None)
+@given(nb=neighbour, profile=st.sampled_from([(2.0, 0.4, 3.0, 2.0, 1.5),
+                                              (25.0, 0.2, 8.0, 2.0, 2.0),
+                                              (math.inf, 0.4, 3.0, math.inf, math.inf)]))
+def test_the_floor_bounds_every_disc_a_neighbour_can_get(nb, profile):
+    """neighbour_floor is at most the free distance this robot owns toward the disc
+    neighbour_radii gives (round its claim, or the stop strip behind the neighbour), as
+    speed_limits measures it from the disc's centre, and its top at least the claim."""
+    rel_x, rel_y, heading, speed, turn, age, pieces, bend = nb
+    accel, half_base, top_speed, speed_up, turn_up = profile
+    trail = _walk(pieces, bend)
+    args = (A, accel, half_base, top_speed, STALE, STOP, top_speed, speed_up, 0.04, turn_up)
+    full, half, east, north, claim = neighbour_radii(rel_x, rel_y, heading, speed, turn, age,
+                                                     trail, *args)
+    floor, top = neighbour_floor(rel_x, rel_y, speed, age, trail[0][0], A, accel, top_speed,
+                                 STALE, speed_up, 0.04)
+    dx, dy = east - rel_x, north - rel_y       # the disc's centre from this robot
+    d = math.sqrt(dx * dx + dy * dy)
+    assert floor <= min(d - full, 0.5 * (d - half))
+    assert claim <= top
+
+
+@settings(max_examples=300, deadline=None)
+@given(hazards=st.lists(st.tuples(st.floats(-8.0, 8.0), st.floats(-8.0, 8.0),
+                                  st.floats(0.5, 3.0), st.floats(0.0, 2.0),
+                                  st.booleans()), max_size=12),
+       motion=st.tuples(st.floats(-math.pi, math.pi), st.floats(-3.0, 3.0),
+                        st.floats(-2.0, 2.0)))
+def test_leaving_out_the_hazards_that_cannot_bind_keeps_the_limits(hazards, motion):
+    """Folding only the hazards can_bind keeps, given floors below their free distances,
+    nearest first, gives the limits and room of folding them all: a hazard it drops
+    changes neither gap nor the room."""
+    theta, v_now, u_now = motion
+    frame = limit_frame(theta, v_now, u_now, ACCEL, 0.2, 0.02, 3 * math.pi, 0.8, TOP, 0.12,
+                        1.5)
+    discs = []
+    for x, y, radius, slack, moving in hazards:
+        d = math.sqrt(x * x + y * y)
+        half = 2.0 * radius if moving else -math.inf
+        full = -math.inf if moving else radius
+        floor = min(d - full, 0.5 * (d - half)) - slack     # any bound below will do
+        discs.append((floor, x, y, full, half, 1.0 if moving else 0.0))
+    every = NO_GAPS
+    for _, x, y, full, half, moving in discs:
+        every = fold_hazard(every, frame, x, y, full, half, moving)
+    kept, folded = NO_GAPS, 0
+    for floor, x, y, full, half, moving in sorted(discs):
+        if can_bind(kept, frame, floor):
+            kept = fold_hazard(kept, frame, x, y, full, half, moving)
+            folded += 1
+    assert frame_limits(kept, frame) == frame_limits(every, frame)
+    assert folded <= len(discs)
+
+
+def test_far_discs_are_left_out():
+    """Behind a hazard 2 m ahead, ones whose free distance is at least 5 m, any way round,
+    cannot bind."""
+    frame = limit_frame(0.0, 1.0, 0.0, ACCEL, 0.2, 0.02, 3 * math.pi, 0.8, TOP, 0.12, 1.5)
+    gaps = fold_hazard(NO_GAPS, frame, 2.0, 0.0, 1.0, -math.inf, 0.0)
+    gaps = fold_hazard(gaps, frame, -2.0, 0.0, 1.0, -math.inf, 0.0)
+    assert not can_bind(gaps, frame, 5.0)
+    assert can_bind(gaps, frame, 0.5)
+    assert can_bind(NO_GAPS, frame, 0.5)          # nothing yet: every disc can bind

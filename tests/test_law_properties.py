@@ -2,15 +2,19 @@
 compiled law (the batch simulator's) returns exactly what the interpreted one (an agent's)
 does."""
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import agent.governor
+import agent.law
 from agent.config import ControlParams, RobotParams
+from agent.governor import NO_GAPS, fold_hazard, frame_limits
 from agent.kinematics import body_velocity, wheel_command
-from agent.law import LawMemory, LawParams, law_step
+from agent.law import LawMemory, LawParams, governor_frame, last_velocity, law_step
 from firmware_sim import compiled
 
 P = ControlParams()
@@ -58,9 +62,22 @@ def cases(draw):
             *([h[c] for h in hazards] for c in range(5)), mem)
 
 
-def run(law, case, columns=list, lp=LP):
+law_module = SimpleNamespace(**vars(agent.law), **{
+    name: getattr(agent.governor, name) for name in ("fold_hazard", "frame_limits")})
+
+
+def run(law, case, columns=list, lp=LP, fns=law_module):
+    """``law`` on ``case``, the governor's limits among its hazards by ``fns`` (agent.law
+    and agent.governor's functions, or their compiled versions)."""
     pose, ref, *cols, mem = case
-    return law(*pose, *ref, 1.0, -0.5, *(columns(c) for c in cols), mem, lp, P.period)
+    hx, hy, hr, hh, hm = cols[7:]
+    frame = fns.governor_frame(pose[2], *fns.last_velocity(mem, lp), lp, P.period)
+    gaps = NO_GAPS
+    for h in range(len(hr)):
+        gaps = fns.fold_hazard(gaps, frame, hx[h] - pose[0], hy[h] - pose[1], hr[h], hh[h],
+                               hm[h])
+    return law(*pose, *ref, 1.0, -0.5, *(columns(c) for c in cols[:7]),
+               fns.frame_limits(gaps, frame), mem, lp, P.period)
 
 
 @settings(max_examples=300, deadline=None)
@@ -126,8 +143,7 @@ def test_braking_takes_the_whole_ramp_though_speeding_up_does_not():
     standing and asked to go, it gains 2 m/s^2 x T."""
     ground = 2 * math.pi * SPORTY.wheel_radius
     moving = LawMemory(wheel_r=5.0 / ground, wheel_l=5.0 / ground)
-    args = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, [], [], [], [], [], [], [], [], [], [], [],
-            [])
+    args = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, [], [], [], [], [], [], [], NO_GAPS)
     v, _, _, _, _ = law_step(*args, moving, LP_SPORTY, P.period)
     assert v == pytest.approx(5.0 - SPORTY.a_max * P.period)
     v, _, _, _, _ = law_step(0.0, 0.0, 0.0, 5.0, 0.0, *args[5:], LawMemory(), LP_SPORTY,
@@ -139,7 +155,8 @@ def test_braking_takes_the_whole_ramp_though_speeding_up_does_not():
 @given(cases(), st.sampled_from([LP, LP_CART, LP_SPORTY]))
 def test_compiled_law_equals_the_interpreted_one(case, lp):
     want = run(law_step, case, lp=lp)
-    got = run(compiled.kernels().law_step, case, lambda c: np.array(c, dtype=float), lp=lp)
+    got = run(compiled.kernels().law_step, case, lambda c: np.array(c, dtype=float), lp=lp,
+              fns=compiled.kernels())
     assert got == want                       # bit for bit, memory included
 
 
@@ -147,7 +164,7 @@ def test_compiled_law_equals_the_interpreted_one(case, lp):
 @given(st.floats(0.0, 1e-12), angle)
 def test_reference_at_the_robot(offset, theta):
     v, u, _, _, _ = law_step(1.0, 2.0, theta, 1.0 + offset, 2.0, 0.0, 0.0, [], [], [], [], [],
-                             [], [], [], [], [], [], [], LawMemory(), LP, P.period)
+                             [], [], NO_GAPS, LawMemory(), LP, P.period)
     assert math.isfinite(u) and abs(v) <= P.K * 1e-12 + 1e-15
 
 
@@ -158,10 +175,12 @@ def test_turning_takes_the_ramp_first_unless_the_robot_must_brake():
     curve and braking takes the ramp first."""
     step = CART.wheel_ramp * P.period
     mem = LawMemory(wheel_r=2.0, wheel_l=2.0)
-    free = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], [], [],
-                    [], [], [], mem, LP_CART, P.period)[4]
+    free = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], NO_GAPS,
+                    mem, LP_CART, P.period)[4]
     assert free.wheel_r - free.wheel_l == pytest.approx(2 * step)
-    braking = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], [1.2],
-                       [0.0], [1.0], [-math.inf], [0.0], mem, LP_CART, P.period)[4]
+    frame = governor_frame(0.0, *last_velocity(mem, LP_CART), LP_CART, P.period)
+    ahead = frame_limits(fold_hazard(NO_GAPS, frame, 1.2, 0.0, 1.0, -math.inf, 0.0), frame)
+    braking = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], ahead,
+                       mem, LP_CART, P.period)[4]
     assert braking.wheel_r + braking.wheel_l == pytest.approx(4.0 - 2 * step)
     assert braking.wheel_r == pytest.approx(braking.wheel_l)

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 from fakes import MirrorMotor, SharedSwarm
-from helpers import SimClock
+from helpers import SimClock, governor_discs
 
 from agent.config import RobotParams
 from agent.kinematics import TWO_PI, arc_step, body_velocity
@@ -209,7 +209,7 @@ def test_no_arming_without_a_fix_and_a_stale_fix_brakes_to_a_sticky_hold():
     assert agent.set_mode(AgentMode.FORMATION).startswith("pose fix")
 
 
-def test_the_position_uncertainty_grows_every_hazard():
+def test_the_position_uncertainty_grows_every_hazard(monkeypatch):
     clock, net, agent, world, feed = slipping_agent(PoseSettings(drift=0.1))
     drive(clock, agent, world, feed, 0.1)
     net.obstacle_msgs[1] = ObstaclesMsg(1, 1, clock.wall(), np.array([[3.0, 0.0]]),
@@ -218,12 +218,10 @@ def test_the_position_uncertainty_grows_every_hazard():
                                  StateFlags.ARMED))
 
     def radii():
-        pose, nbrs, obs = agent.pose, net.port(1).neighbours(), net.obstacle_msgs[1]
-        near, ox, oy, orad = agent._surroundings(pose, nbrs, obs, clock.wall())
-        hx, hy, hr, hh, hm = agent._hazards(pose, nbrs, ox, oy, orad, len(near.stale_x),
-                                            clock.wall())
-        assert hx == [0.0, 3.0]                                 # the neighbour, the obstacle
-        return np.array(hr + hh[:1])
+        folded, _ = governor_discs(monkeypatch, agent, net.obstacle_msgs[1])
+        east = [h[0] + agent.pose[0] for h in folded]
+        assert east == pytest.approx([3.0, 0.0])                # the obstacle, the neighbour
+        return np.array([folded[0][2], folded[1][3]])
 
     before, u0 = radii(), agent.fusion.uncertainty
     assert 0.0 < u0 <= 0.005
