@@ -235,53 +235,62 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
                         mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4], mem_f[i, 5],
                         mem_f[i, 6], mem_i[i, 3])
-        # the governor's hazards: the detected obstacles, and neighbours where they can be
-        # by now given their data's age; all grown by the robot's own position uncertainty
-        # (own[:, 3], with a pose source). The nearest neighbours first, by a bound of the
-        # free distance toward their discs; a disc is computed only where it can bind or
-        # the law can pass the neighbour (as agent.node.Agent._limits). None with the
-        # governor off: the law reads the limits for it alone
-        grow = own[i, 3] if own.shape[1] > 3 else 0.0
-        v_now, u_now = last_velocity(mem, p)
-        frame = governor_frame(own[i, 2], v_now, u_now, p, period)
-        gaps = NO_GAPS
-        n_c = 0
+        # the governor's limits among its hazards: the detected obstacles, and neighbours
+        # where they can be by now given their data's age; all grown by the robot's own
+        # position uncertainty (own[:, 3], with a pose source). The nearest neighbours
+        # first, by a bound of the free distance toward their discs; a disc is computed
+        # only where it can bind or the law can pass the neighbour (as
+        # agent.node.Agent._limits). None with the governor off
         nbr_g[:m] = 0.0
-        for q in range(k if p.governor else 0):
-            gaps = fold_hazard(gaps, frame, o_x[q] - x, o_y[q] - y, o_r[q] + a + grow,
-                               -math.inf, 0.0)
-        for q in range(m if p.governor else 0):
-            j = nbr_j[q]
-            if not truth and seen[j, 2] == NONE:
-                continue
-            age = t - view[j, 5]
-            since = min(max(int(math.ceil(age / period - 1e-9)), 0), ring - 1)
-            floor, top = neighbour_floor(x - view[j, 0], y - view[j, 1], view[j, 3], age,
-                                         path[step % ring, i, 2]
-                                         - path[(step - since) % ring, i, 2], a, p.accel,
-                                         top_speed, staleness, p.speed_up, lag)
-            c_floor[n_c], c_q[n_c] = floor - 0.5 * grow, q
-            nbr_g[q] = top + grow - a
-            n_c += 1
-        trails_age = math.nan
-        for c in np.argsort(c_floor[:n_c]):
-            q = c_q[c]
-            j = nbr_j[q]
-            dx, dy = nbr_x[q] - x, nbr_y[q] - y
-            if not can_bind(gaps, frame, c_floor[c]) and not may_pass(
-                    math.sqrt(dx * dx + dy * dy), nbr_g[q], p):
-                continue
-            age = t - view[j, 5]
-            if age != trails_age:       # neighbours heard in the same period share it
-                trails_age = age
-                own_motion(path, step, i, age, period, trail)
-            full, half, east, north, claim = neighbour_radii(
-                x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3], view[j, 4], age,
-                trail, a, p.accel, 0.5 * p.wheel_base, top_speed, staleness, stop_time,
-                wheel_top, p.speed_up, lag, p.turn_up)
-            gaps = fold_hazard(gaps, frame, view[j, 0] + east - x, view[j, 1] + north - y,
-                               full + grow, half + grow, 1.0 if age <= staleness else 0.0)
-            nbr_g[q] = claim + grow - a
+        limits = NO_GAPS
+        if p.governor:
+            grow = own[i, 3] if own.shape[1] > 3 else 0.0
+            v_now, u_now = last_velocity(mem, p)
+            frame = governor_frame(own[i, 2], v_now, u_now, p, period)
+            gaps = NO_GAPS
+            for q in range(k):
+                gaps = fold_hazard(gaps, frame, o_x[q] - x, o_y[q] - y, o_r[q] + a + grow,
+                                   -math.inf, 0.0)
+            n_c = 0
+            for q in range(m):
+                j = nbr_j[q]
+                if not truth and seen[j, 2] == NONE:
+                    continue
+                age = t - view[j, 5]
+                since = min(max(int(math.ceil(age / period - 1e-9)), 0), ring - 1)
+                floor, top = neighbour_floor(x - view[j, 0], y - view[j, 1], view[j, 3], age,
+                                             path[step % ring, i, 2]
+                                             - path[(step - since) % ring, i, 2], a, p.accel,
+                                             top_speed, staleness, p.speed_up, lag)
+                floor -= 0.5 * grow
+                # in order of the floor (insertion: a few neighbours, no allocation)
+                c = n_c
+                while c > 0 and c_floor[c - 1] > floor:
+                    c_floor[c], c_q[c] = c_floor[c - 1], c_q[c - 1]
+                    c -= 1
+                c_floor[c], c_q[c] = floor, q
+                nbr_g[q] = top + grow - a
+                n_c += 1
+            trails_age = math.nan
+            for c in range(n_c):
+                q = c_q[c]
+                j = nbr_j[q]
+                dx, dy = nbr_x[q] - x, nbr_y[q] - y
+                if not can_bind(gaps, frame, c_floor[c]) and not may_pass(
+                        math.sqrt(dx * dx + dy * dy), nbr_g[q], p):
+                    continue
+                age = t - view[j, 5]
+                if age != trails_age:       # neighbours heard in the same period share it
+                    trails_age = age
+                    own_motion(path, step, i, age, period, trail)
+                full, half, east, north, claim = neighbour_radii(
+                    x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3], view[j, 4], age,
+                    trail, a, p.accel, 0.5 * p.wheel_base, top_speed, staleness, stop_time,
+                    wheel_top, p.speed_up, lag, p.turn_up)
+                gaps = fold_hazard(gaps, frame, view[j, 0] + east - x, view[j, 1] + north - y,
+                                   full + grow, half + grow, 1.0 if age <= staleness else 0.0)
+                nbr_g[q] = claim + grow - a
+            limits = frame_limits(gaps, frame)
         if not truth:
             # stale neighbours become static obstacles; unheard ones are unknown
             fresh = 0
@@ -317,7 +326,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         v, u, mode, allowed, new = law_step(x, y, own[i, 2], rx, ry, rvx, rvy, nbr_x[:m],
                                             nbr_y[:m], nbr_h[:m], nbr_g[:m], o_x[:k],
                                             o_y[:k], o_r[:k],
-                                            frame_limits(gaps, frame), mem, p, period)
+                                            limits, mem, p, period)
         out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2], out_cmd[i, 3] = v, u, mode, allowed
         out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
         out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey

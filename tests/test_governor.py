@@ -867,32 +867,37 @@ def test_the_floor_bounds_every_disc_a_neighbour_can_get(nb, profile):
 
 
 @settings(max_examples=300, deadline=None)
-@given(hazards=st.lists(st.tuples(st.floats(-8.0, 8.0), st.floats(-8.0, 8.0),
-                                  st.floats(0.5, 3.0), st.floats(0.0, 2.0),
-                                  st.booleans()), max_size=12),
+@given(nbrs=st.lists(neighbour, max_size=10),
+       obstacles=st.lists(st.tuples(st.floats(-8.0, 8.0), st.floats(-8.0, 8.0),
+                                    st.floats(0.2, 2.0)), max_size=3),
        motion=st.tuples(st.floats(-math.pi, math.pi), st.floats(-3.0, 3.0),
                         st.floats(-2.0, 2.0)))
-def test_leaving_out_the_hazards_that_cannot_bind_keeps_the_limits(hazards, motion):
-    """Folding only the hazards can_bind keeps, given floors below their free distances,
-    nearest first, gives the limits and room of folding them all: a hazard it drops
-    changes neither gap nor the room."""
+def test_leaving_out_the_discs_that_cannot_bind_keeps_the_limits(nbrs, obstacles, motion):
+    """Obstacles first, then the neighbours' discs nearest floor first, each computed only
+    where can_bind says it can bind: the limits and the room of folding every disc, bit
+    for bit."""
     theta, v_now, u_now = motion
     frame = limit_frame(theta, v_now, u_now, ACCEL, 0.2, 0.02, 3 * math.pi, 0.8, TOP, 0.12,
                         1.5)
-    discs = []
-    for x, y, radius, slack, moving in hazards:
-        d = math.sqrt(x * x + y * y)
-        half = 2.0 * radius if moving else -math.inf
-        full = -math.inf if moving else radius
-        floor = min(d - full, 0.5 * (d - half)) - slack     # any bound below will do
-        discs.append((floor, x, y, full, half, 1.0 if moving else 0.0))
     every = NO_GAPS
-    for _, x, y, full, half, moving in discs:
-        every = fold_hazard(every, frame, x, y, full, half, moving)
-    kept, folded = NO_GAPS, 0
-    for floor, x, y, full, half, moving in sorted(discs):
+    for x, y, r in obstacles:
+        every = fold_hazard(every, frame, x, y, r + A, -math.inf, 0.0)
+    kept = every
+    discs = []
+    for rel_x, rel_y, heading, speed, turn, age, pieces, bend in nbrs:
+        trail = _walk(pieces, bend)
+        full, half, east, north, _ = neighbour_radii(
+            rel_x, rel_y, heading, speed, turn, age, trail, A, ACCEL, 0.4, TOP, STALE, STOP,
+            TOP, 2.0, 0.04, 1.5)
+        floor, _ = neighbour_floor(rel_x, rel_y, speed, age, trail[0][0], A, ACCEL, TOP,
+                                   STALE, 2.0, 0.04)
+        disc = (east - rel_x, north - rel_y, full, half, 1.0)
+        every = fold_hazard(every, frame, *disc)
+        discs.append((floor, disc))
+    folded = 0
+    for floor, disc in sorted(discs, key=lambda d: d[0]):
         if can_bind(kept, frame, floor):
-            kept = fold_hazard(kept, frame, x, y, full, half, moving)
+            kept = fold_hazard(kept, frame, *disc)
             folded += 1
     assert frame_limits(kept, frame) == frame_limits(every, frame)
     assert folded <= len(discs)
@@ -907,3 +912,8 @@ def test_far_discs_are_left_out():
     assert not can_bind(gaps, frame, 5.0)
     assert can_bind(gaps, frame, 0.5)
     assert can_bind(NO_GAPS, frame, 0.5)          # nothing yet: every disc can bind
+    # inside the margin of hazards ahead and behind, a disc within the margin can bind
+    # aside: its gap, below zero, grows more negative over a cosine below 1
+    close = fold_hazard(NO_GAPS, frame, 1.05, 0.0, 1.0, -math.inf, 0.0)
+    close = fold_hazard(close, frame, -1.05, 0.0, 1.0, -math.inf, 0.0)
+    assert close[0] < 0.0 and can_bind(close, frame, 0.1)
