@@ -197,7 +197,7 @@ def neighbour_floor(rel_x: float, rel_y: float, speed: float, age: float, path: 
     (:func:`neighbour_radii` takes the claim that much smaller as its centre comes nearer
     along the report's segment); behind it, the stop strip leaves more free distance,
     never less (:func:`_ahead`). A few operations: for leaving out the discs that cannot
-    bind (:func:`can_bind`) before computing them."""
+    bind (:func:`binding`) before computing them."""
     if age > staleness or math.isinf(accel):
         return -math.inf, math.inf
     age, speed = max(age, 0.0), abs(speed)
@@ -616,7 +616,7 @@ def speed_limits(x: float, y: float, theta: float, v_now: float, u_now: float,
     leaves no room to keep; not turning would never take the robot out of it.
 
     The same in pieces, for a caller that skips the hazards that cannot bind
-    (:func:`can_bind`): :func:`limit_frame`, :func:`fold_hazard` for each hazard, in any
+    (:func:`binding`): :func:`limit_frame`, :func:`fold_hazard` for each hazard, in any
     order, and :func:`frame_limits`."""
     frame = limit_frame(theta, v_now, u_now, accel, period, latency, turn_rate, wheel_base,
                         top_speed, margin, turn_up)
@@ -688,16 +688,15 @@ def fold_hazard(gaps: tuple[float, float, float], frame: Frame, dx: float, dy: f
     return gap_fwd, gap_bwd, room
 
 
-def can_bind(gaps: tuple[float, float, float], frame: Frame, floor: float) -> bool:
-    """Whether a hazard this robot owns at least ``floor`` [m] of free distance toward
-    can change ``gaps`` (:func:`fold_hazard`): a cosine is at most 1, so beyond the margin
-    its gaps are at least floor less the margin and its room at least floor. A hazard
-    that cannot is left out without changing the limits, in any order of the hazards."""
-    if floor >= frame[8]:
-        return False             # fold_hazard skips it
+def binding(gaps: tuple[float, float, float], frame: Frame) -> float:
+    """The free distance [m] below which a hazard can change ``gaps`` (:func:`fold_hazard`):
+    beyond the margin its gaps are at least its free distance less the margin, a cosine
+    being at most 1, and its room at least its free distance; from the distance
+    fold_hazard skips, none. A hazard this robot owns no less free distance toward (as
+    :func:`neighbour_floor` bounds it) is left out without changing the limits, in any
+    order of the hazards."""
     margin = frame[9]
-    return (floor < margin or floor - margin < gaps[0] or floor - margin < gaps[1]
-            or floor < gaps[2])
+    return min(frame[8], max(margin, margin + gaps[0], margin + gaps[1], gaps[2]))
 
 
 def frame_limits(gaps: tuple[float, float, float], frame: Frame

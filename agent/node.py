@@ -31,7 +31,7 @@ from agent.formation import Formation
 from agent.governor import (
     NO_GAPS,
     SPLITS,
-    can_bind,
+    binding,
     fold_hazard,
     frame_limits,
     neighbour_floor,
@@ -455,9 +455,10 @@ class Agent:
         source, every radius also grown by this robot's position uncertainty.
 
         The nearest first, by a cheap bound of the free distance toward each neighbour's
-        disc (agent.governor.neighbour_floor); a disc is computed only where it can bind
-        (agent.governor.can_bind) or the law can pass the neighbour (agent.law.may_pass):
-        the limits are those of every disc. ``halves`` gets the half radius [m] of each
+        disc (agent.governor.neighbour_floor); a disc is computed only where that is below
+        the distance within which a disc can bind (agent.governor.binding) or where the
+        law can pass the neighbour (agent.law.may_pass): the limits are those of every
+        disc. ``halves`` gets the half radius [m] of each
         neighbour's claim, which the law passes round (A13), by robot id; or, where it
         cannot pass the neighbour, a bound of it."""
         s = self.s
@@ -487,8 +488,8 @@ class Agent:
             ahead.append((floor - 0.5 * grow, rid, -dx, -dy, age, moved, top + grow))
         ahead.sort()                     # by the floor (then by id: the ids differ)
         for floor, rid, rel_x, rel_y, age, moved, top in ahead:
-            if not can_bind(gaps, frame, floor) and not self._may_pass(law_xy.get(rid), pose,
-                                                                      top - a):
+            if floor >= binding(gaps, frame) and not self._may_pass(law_xy.get(rid), pose,
+                                                                     top - a):
                 halves[rid] = top
                 continue
             m = neighbours[rid].msg

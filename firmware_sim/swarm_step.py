@@ -21,7 +21,7 @@ from agent.governor import (
     NO_GAPS,
     SPLITS,
     TRAIL_ROWS,
-    can_bind,
+    binding,
     fold_hazard,
     frame_limits,
     neighbour_floor,
@@ -276,7 +276,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 q = c_q[c]
                 j = nbr_j[q]
                 dx, dy = nbr_x[q] - x, nbr_y[q] - y
-                if not can_bind(gaps, frame, c_floor[c]) and not may_pass(
+                if c_floor[c] >= binding(gaps, frame) and not may_pass(
                         math.sqrt(dx * dx + dy * dy), nbr_g[q], p):
                     continue
                 age = t - view[j, 5]

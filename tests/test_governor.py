@@ -14,8 +14,8 @@ from agent.governor import (
     _own_share,
     _paired,
     approach,
+    binding,
     braking_speed,
-    can_bind,
     fold_hazard,
     frame_limits,
     limit_frame,
@@ -874,8 +874,8 @@ def test_the_floor_bounds_every_disc_a_neighbour_can_get(nb, profile):
                         st.floats(-2.0, 2.0)))
 def test_leaving_out_the_discs_that_cannot_bind_keeps_the_limits(nbrs, obstacles, motion):
     """Obstacles first, then the neighbours' discs nearest floor first, each computed only
-    where can_bind says it can bind: the limits and the room of folding every disc, bit
-    for bit."""
+    where its floor is below the binding distance: the limits and the room of folding
+    every disc, bit for bit."""
     theta, v_now, u_now = motion
     frame = limit_frame(theta, v_now, u_now, ACCEL, 0.2, 0.02, 3 * math.pi, 0.8, TOP, 0.12,
                         1.5)
@@ -883,24 +883,27 @@ def test_leaving_out_the_discs_that_cannot_bind_keeps_the_limits(nbrs, obstacles
     for x, y, r in obstacles:
         every = fold_hazard(every, frame, x, y, r + A, -math.inf, 0.0)
     kept = every
-    discs = []
-    for rel_x, rel_y, heading, speed, turn, age, pieces, bend in nbrs:
-        trail = _walk(pieces, bend)
+
+    def disc(rel_x, rel_y, heading, speed, turn, age, trail):
         full, half, east, north, _ = neighbour_radii(
             rel_x, rel_y, heading, speed, turn, age, trail, A, ACCEL, 0.4, TOP, STALE, STOP,
             TOP, 2.0, 0.04, 1.5)
-        floor, _ = neighbour_floor(rel_x, rel_y, speed, age, trail[0][0], A, ACCEL, TOP,
+        return east - rel_x, north - rel_y, full, half, 1.0
+
+    floors = []
+    for rel_x, rel_y, heading, speed, turn, age, pieces, bend in nbrs:
+        args = (rel_x, rel_y, heading, speed, turn, age, _walk(pieces, bend))
+        every = fold_hazard(every, frame, *disc(*args))
+        floor, _ = neighbour_floor(rel_x, rel_y, speed, age, args[-1][0][0], A, ACCEL, TOP,
                                    STALE, 2.0, 0.04)
-        disc = (east - rel_x, north - rel_y, full, half, 1.0)
-        every = fold_hazard(every, frame, *disc)
-        discs.append((floor, disc))
+        floors.append((floor, args))
     folded = 0
-    for floor, disc in sorted(discs, key=lambda d: d[0]):
-        if can_bind(kept, frame, floor):
-            kept = fold_hazard(kept, frame, *disc)
+    for floor, args in sorted(floors, key=lambda f: f[0]):
+        if floor < binding(kept, frame):
+            kept = fold_hazard(kept, frame, *disc(*args))
             folded += 1
     assert frame_limits(kept, frame) == frame_limits(every, frame)
-    assert folded <= len(discs)
+    assert folded <= len(floors)
 
 
 def test_far_discs_are_left_out():
@@ -909,11 +912,11 @@ def test_far_discs_are_left_out():
     frame = limit_frame(0.0, 1.0, 0.0, ACCEL, 0.2, 0.02, 3 * math.pi, 0.8, TOP, 0.12, 1.5)
     gaps = fold_hazard(NO_GAPS, frame, 2.0, 0.0, 1.0, -math.inf, 0.0)
     gaps = fold_hazard(gaps, frame, -2.0, 0.0, 1.0, -math.inf, 0.0)
-    assert not can_bind(gaps, frame, 5.0)
-    assert can_bind(gaps, frame, 0.5)
-    assert can_bind(NO_GAPS, frame, 0.5)          # nothing yet: every disc can bind
+    assert not 5.0 < binding(gaps, frame)
+    assert 0.5 < binding(gaps, frame)
+    assert 0.5 < binding(NO_GAPS, frame)          # nothing yet: every disc can bind
     # inside the margin of hazards ahead and behind, a disc within the margin can bind
     # aside: its gap, below zero, grows more negative over a cosine below 1
     close = fold_hazard(NO_GAPS, frame, 1.05, 0.0, 1.0, -math.inf, 0.0)
     close = fold_hazard(close, frame, -1.05, 0.0, 1.0, -math.inf, 0.0)
-    assert close[0] < 0.0 and can_bind(close, frame, 0.1)
+    assert close[0] < 0.0 and 0.1 < binding(close, frame)
