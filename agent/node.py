@@ -54,7 +54,7 @@ from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry, Pose
 from agent.pose import PoseFusion
 from agent.progress import PROGRESS, ProgressWatch, tolerance
-from agent.trail import Trail
+from agent.trail import Splits, Trail
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import FixPort, MotorPort, SwarmPort
 from common.schema import ConfigError, Param
@@ -475,40 +475,39 @@ class Agent:
         law_xy = {rid: (nx, ny) for rid, nx, ny in zip(near.fresh_id, near.fresh_x,
                                                         near.fresh_y)}
         reach = s.sensing_range + disc[2] * staleness
+        speed_up, lag = self._commit[:2]
         ahead = []
+        stamp = math.nan                 # neighbours stamped alike share this robot's trail
+        moved: Splits = ()
         for rid, rec in neighbours.items():
             m = rec.msg
             dx, dy = m.x - x, m.y - y
             if rid == me or dx * dx + dy * dy > reach * reach:
                 continue
             age = now_w - m.stamp
-            moved = self.trail.splits(m.stamp, age, SPLITS)
+            if m.stamp != stamp:
+                stamp, moved = m.stamp, self.trail.splits(m.stamp, age, SPLITS)
             floor, top = neighbour_floor(-dx, -dy, m.v, age, moved[0][0], a, disc[1], disc[2],
-                                         staleness, *self._commit[:2])
+                                         staleness, speed_up, lag)
             ahead.append((floor - 0.5 * grow, rid, -dx, -dy, age, moved, top + grow))
         ahead.sort()                     # by the floor (then by id: the ids differ)
+        bind = binding(gaps, frame)
         for floor, rid, rel_x, rel_y, age, moved, top in ahead:
-            if floor >= binding(gaps, frame) and not self._may_pass(law_xy.get(rid), pose,
-                                                                     top - a):
-                halves[rid] = top
-                continue
+            if floor >= bind:            # it cannot bind: is it one the law may pass?
+                lx, ly = law_xy.get(rid, (math.inf, math.inf))
+                lx, ly = lx - x, ly - y
+                if not may_pass(math.sqrt(lx * lx + ly * ly), top - a, self._law_params):
+                    halves[rid] = top
+                    continue
             m = neighbours[rid].msg
             full, half, east, north, claim = neighbour_radii(
                 rel_x, rel_y, m.theta, m.v, m.u, age, moved, a, disc[1], half_base,
                 *disc[2:], *self._commit)
             gaps = fold_hazard(gaps, frame, m.x + east - x, m.y + north - y, full + grow,
                                half + grow, 1.0 if age <= staleness else 0.0)
+            bind = binding(gaps, frame)
             halves[rid] = claim + grow
         return frame_limits(gaps, frame)
-
-    def _may_pass(self, at: tuple[float, float] | None, pose: tuple[float, float, float],
-                  grow: float) -> bool:
-        """Whether the law can pass (A13) a neighbour it sees ``at`` (x, y) [m] (None: it
-        does not see it) whose disc is at most ``grow`` [m] wider than a."""
-        if at is None:
-            return False
-        dx, dy = at[0] - pose[0], at[1] - pose[1]
-        return may_pass(math.sqrt(dx * dx + dy * dy), grow, self._law_params)
 
     def _surroundings(self, pose: tuple[float, float, float],
                       neighbours: Mapping[int, Received[StateMsg]],
