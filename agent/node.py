@@ -458,9 +458,9 @@ class Agent:
         disc (agent.governor.neighbour_floor); a disc is computed only where that is below
         the distance within which a disc can bind (agent.governor.binding) or where the
         law can pass the neighbour (agent.law.may_pass): the limits are those of every
-        disc. ``halves`` gets the half radius [m] of each
-        neighbour's claim, which the law passes round (A13), by robot id; or, where it
-        cannot pass the neighbour, a bound of it."""
+        disc. ``halves`` gets the half radius [m] of each neighbour's claim, which the law
+        passes round (A13), by robot id; or, where it cannot pass the neighbour, a bound
+        of it."""
         s = self.s
         grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
         half_base, disc = self._disc
