@@ -170,6 +170,13 @@ def _watch(i: int, x: float, y: float, m: int, k: int, nbr_d: np.ndarray,
     return max(w + 1, wk + 1)
 
 
+def at_or_before(step: int, since: float, period: float, ring: int) -> int:
+    """The row of the ring of the last periods' paths (``ring`` rows, ``step`` the current
+    period's) of the period at or before ``since`` [s] ago (the oldest kept, if beyond)."""
+    ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
+    return (step - ago) % ring
+
+
 def own_motion(path: np.ndarray, step: int, i: int, age: float, period: float,
                trail: np.ndarray) -> None:
     """Fill ``trail`` (agent.governor.neighbour_radii's rows) with robot ``i``'s motion
@@ -180,8 +187,7 @@ def own_motion(path: np.ndarray, step: int, i: int, age: float, period: float,
     now = path[step % ring, i]
     for piece in range(SPLITS):
         since = age * (SPLITS - piece) / SPLITS
-        ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
-        start = path[(step - ago) % ring, i]
+        start = path[at_or_before(step, since, period, ring), i]
         ago = min(max(int(math.floor((since - age / SPLITS) / period + 1e-9)), 0), ring - 1)
         end = path[(step - ago) % ring, i]
         trail[0, piece] = now[2] - start[2]
@@ -256,12 +262,12 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 j = nbr_j[q]
                 if not truth and seen[j, 2] == NONE:
                     continue
-                age = t - view[j, 5]
-                since = min(max(int(math.ceil(age / period - 1e-9)), 0), ring - 1)
+                age = t - view[j, 5]      # this robot's path since: own_motion's first
+                walked = (path[step % ring, i, 2]
+                          - path[at_or_before(step, age, period, ring), i, 2])
                 floor, top = neighbour_floor(x - view[j, 0], y - view[j, 1], view[j, 3], age,
-                                             path[step % ring, i, 2]
-                                             - path[(step - since) % ring, i, 2], a, p.accel,
-                                             top_speed, staleness, p.speed_up, lag)
+                                             walked, a, p.accel, top_speed, staleness,
+                                             p.speed_up, lag)
                 floor -= 0.5 * grow
                 # in order of the floor (insertion: a few neighbours, no allocation)
                 c = n_c
@@ -272,13 +278,14 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 nbr_g[q] = top + grow - a
                 n_c += 1
             trails_age = math.nan
+            bind = binding(gaps, frame)
             for c in range(n_c):
                 q = c_q[c]
                 j = nbr_j[q]
-                dx, dy = nbr_x[q] - x, nbr_y[q] - y
-                if c_floor[c] >= binding(gaps, frame) and not may_pass(
-                        math.sqrt(dx * dx + dy * dy), nbr_g[q], p):
-                    continue
+                if c_floor[c] >= bind:      # it cannot bind: is it one the law may pass?
+                    dx, dy = nbr_x[q] - x, nbr_y[q] - y
+                    if not may_pass(math.sqrt(dx * dx + dy * dy), nbr_g[q], p):
+                        continue
                 age = t - view[j, 5]
                 if age != trails_age:       # neighbours heard in the same period share it
                     trails_age = age
@@ -289,6 +296,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                     wheel_top, p.speed_up, lag, p.turn_up)
                 gaps = fold_hazard(gaps, frame, view[j, 0] + east - x, view[j, 1] + north - y,
                                    full + grow, half + grow, 1.0 if age <= staleness else 0.0)
+                bind = binding(gaps, frame)
                 nbr_g[q] = claim + grow - a
             limits = frame_limits(gaps, frame)
         if not truth:

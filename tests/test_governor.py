@@ -30,7 +30,7 @@ from agent.governor import (
     turn_limit,
 )
 from agent.kinematics import arc_step, wrap_angle
-from agent.trail import straight, with_motion
+from agent.trail import Trail, straight, with_motion
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
@@ -823,19 +823,14 @@ def test_turning_on_the_spot_with_slipping_wheels_never_drifts_into_a_hazard():
 
 
 def _walk(lengths: list[float], turn: float) -> tuple[list[float], ...]:
-    """A trail (agent.trail) of a robot that walked the pieces ``lengths`` [m] (the stamp's
-    first), turning by ``turn`` [rad] between them."""
-    xs, ys, heading = [0.0], [0.0], 0.0
-    for d in lengths:
-        xs.append(xs[-1] + d * math.cos(heading))
-        ys.append(ys[-1] + d * math.sin(heading))
-        heading += turn
-    paths = [sum(lengths[k:]) for k in range(len(lengths) + 1)]
-    return with_motion(([paths[k] for k in range(SPLITS)], [paths[k + 1] for k in range(SPLITS)],
-                        [xs[-1] - xs[k] for k in range(SPLITS)],
-                        [ys[-1] - ys[k] for k in range(SPLITS)],
-                        [xs[-1] - xs[k + 1] for k in range(SPLITS)],
-                        [ys[-1] - ys[k + 1] for k in range(SPLITS)]))
+    """The trail (agent.trail.Trail.splits) of a robot that walked the pieces ``lengths``
+    [m], one a second (the stamp's first), turning by ``turn`` [rad] between them."""
+    trail, x, y, heading = Trail(10.0), 0.0, 0.0, 0.0
+    trail.record(0.0, x, y)
+    for k, d in enumerate(lengths):
+        x, y, heading = x + d * math.cos(heading), y + d * math.sin(heading), heading + turn
+        trail.record(k + 1.0, x, y)
+    return trail.splits(0.0, float(len(lengths)), SPLITS)
 
 
 neighbour = st.tuples(st.floats(-9.0, 9.0), st.floats(-9.0, 9.0), st.floats(-4.0, 4.0),
