@@ -11,6 +11,10 @@ The functions of :data:`INLINED` are inlined into their callers (numba's ``inlin
 own IR level): the safety governor's helpers run per neighbour, and the calls between
 them, left to LLVM, stayed real calls (docs/performance.md).
 
+Divisions follow numpy's error model: a division by zero gives inf or nan instead of
+raising, which spares a test before every division (the law guards its own divisions, and
+the compiled runs give the interpreted results, ``tests/test_compiled.py``).
+
 numba caches the machine code, but it does not notice that a function it compiled calls a
 function of another file that has changed since. So the cache lives in a folder named
 after a hash of all the sources and of this module (``$BOUNDSWARM_NUMBA_CACHE``, else
@@ -98,6 +102,7 @@ def _compile(modules: list[types.ModuleType], numba: Any) -> types.SimpleNamespa
                                           obj.__defaults__, obj.__closure__)
                 originals[obj] = numba.njit(copy, cache=True,
                                             parallel="prange" in code.co_names,
+                                            error_model="numpy",
                                             inline="always" if m.__name__ in INLINED
                                             else "never")
     for ns in namespaces.values():
