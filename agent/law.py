@@ -414,8 +414,12 @@ def in_the_way(heading: float, x: float, y: float, nbr_x: FloatSeq, nbr_y: Float
             continue
         dx, dy = nbr_x[j] - x, nbr_y[j] - y
         d = math.sqrt(dx * dx + dy * dy)
-        grow = max(nbr_grow[j], 0.0)
-        if EPS < d < min(within + grow, limit) and d - grow < nearest:
+        # min and max as conditional expressions: the same, cheaper interpreted
+        grow = nbr_grow[j]
+        grow = 0.0 if 0.0 > grow else grow
+        bound = within + grow
+        bound = limit if limit < bound else bound
+        if EPS < d < bound and d - grow < nearest:
             reach = passing + grow
             along = dx * hx + dy * hy          # m, d times the cosine of the bearing's angle
             # within asin(reach / d) of the bearing: cos^2 > 1 - (reach / d)^2
