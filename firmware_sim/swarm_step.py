@@ -177,6 +177,13 @@ def at_or_before(step: int, since: float, period: float, ring: int) -> int:
     return (step - ago) % ring
 
 
+def at_or_after(step: int, since: float, period: float, ring: int) -> int:
+    """The row, as :func:`at_or_before`, of the period at or after ``since`` [s] ago (the
+    current one, if since is below a period)."""
+    ago = min(max(int(math.floor(since / period + 1e-9)), 0), ring - 1)
+    return (step - ago) % ring
+
+
 def own_motion(path: np.ndarray, step: int, i: int, age: float, period: float,
                trail: np.ndarray) -> None:
     """Fill ``trail`` (agent.governor.neighbour_radii's rows) with robot ``i``'s motion
@@ -188,8 +195,7 @@ def own_motion(path: np.ndarray, step: int, i: int, age: float, period: float,
     for piece in range(SPLITS):
         since = age * (SPLITS - piece) / SPLITS
         start = path[at_or_before(step, since, period, ring), i]
-        ago = min(max(int(math.floor((since - age / SPLITS) / period + 1e-9)), 0), ring - 1)
-        end = path[(step - ago) % ring, i]
+        end = path[at_or_after(step, since - age / SPLITS, period, ring), i]
         trail[0, piece] = now[2] - start[2]
         trail[1, piece] = now[2] - end[2]
         trail[2, piece] = now[0] - start[0]
