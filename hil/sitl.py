@@ -1,10 +1,11 @@
-"""The one-command SITL swarm: router, plant, one agent process per robot, recording.
+"""The one-command SITL swarm: router, plant, the agents' processes, recording.
 
 Sequence: start the Zenoh router in a process of its own (loopback endpoint, scouting off;
 hil.sitl_launch), connect to it and start recording; write each robot's agent config and the
 run manifest; start the plant process(es) (emulated drivers on one CAN bus per robot, robot
 motion, truth and obstacle detections) and wait for truth from every robot; start the agents
-and wait for every liveliness token; publish the mission with an epoch a little in the
+(a process per robot, or per ``agents_per_process`` robots: ``agent_hosts``) and wait for
+every liveliness token; publish the mission with an epoch a little in the
 future; watch the run (progress, live status table, lost processes); then end every child
 (agents first: zero velocity, IDLE; the router once the recording has settled) and turn the
 recording into the same run folder as ``sim``, plus loop timing, neighbour-state age
@@ -115,6 +116,22 @@ def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def agent_hosts(settings: list[AgentSettings], per_process: int,
+                killed: set[int]) -> list[list[AgentSettings]]:
+    """The agents' processes: up to ``per_process`` robots of one tick phase each, in the
+    scenario's order; a robot in ``killed`` alone (a planned death ends its process)."""
+    hosts: list[list[AgentSettings]] = []
+    by_phase: dict[float, list[AgentSettings]] = {}
+    for s in settings:
+        if s.robot_id in killed or per_process == 1:
+            hosts.append([s])
+        else:
+            by_phase.setdefault(s.tick_phase, []).append(s)
+    for group in by_phase.values():
+        hosts += [group[k:k + per_process] for k in range(0, len(group), per_process)]
+    return hosts
 
 
 def _swarm_name(sc: Scenario) -> str:
@@ -237,14 +254,22 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                     f"the plant did not come up within {opts.startup_timeout:g} s "
                     f"(--startup-timeout): no truth from robot(s) "
                     f"{_ids(ids - set(truth.snapshot()))}", children))
-            agents = {}
-            for s in settings:
-                agents[s.robot_id] = children.start(
-                    f"agent_{s.robot_id}",
-                    ["agent", "--config", str(config_dir / f"robot_{s.robot_id}.toml"),
-                     "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")])
+            agents: dict[int, Child] = {}
+            hosts = agent_hosts(settings, opts.launch.agents_per_process,
+                                {k.robot for k in sc.world.kill})
+            for k, host in enumerate(hosts):
+                args = ["agent"]
+                for s in host:
+                    args += ["--config", str(config_dir / f"robot_{s.robot_id}.toml"),
+                             "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")]
+                child = children.start(
+                    f"agent_{host[0].robot_id}" if len(host) == 1 else f"agents_{k}", args)
+                agents.update({s.robot_id: child for s in host})
             _write_manifest(out, sc, settings, endpoint, swarm,
-                            {"router": router_pid, **{c.name: c.pid for c in children.children}})
+                            {"router": router_pid,
+                             **{c.name: c.pid for c in children.children
+                                if c.name.startswith("plant")},
+                             **{f"agent_{rid}": c.pid for rid, c in agents.items()}})
             console.print(f"{len(agents)} agents starting ...")
             if not wait_until(lambda: presence.alive() >= ids or children.failed(),
                               opts.startup_timeout) or children.failed():
@@ -263,7 +288,7 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             _watch(sc, run, children, agents, router, keys, mission, truth, states, presence,
                    opts, console)
             # clean stop: agents first, all at once (zero velocity, IDLE), then the plants
-            children.terminate_together(list(agents.values()))
+            children.terminate_together(list({c.pid: c for c in agents.values()}.values()))
             children.terminate_all()
         recorder.settle()             # what they published before they ended has arrived
         recorder.close()

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import time
 from pathlib import Path
@@ -21,7 +22,8 @@ if TYPE_CHECKING:
 
 
 def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser("sitl", help="SITL swarm: router, plant, one agent process per robot")
+    p = sub.add_parser("sitl", help="SITL swarm: router, plant, an agent process per robot "
+                       "(or per --agents-per-process robots)")
     p.add_argument("scenario", help="scenario file (TOML)")
     p.add_argument("--out", required=True, help="run folder to write")
     p.add_argument("--duration", type=float, help="override the scenario's duration [s]")
@@ -151,6 +153,10 @@ def run(args: argparse.Namespace, console: Console) -> int:
                       f"most of it in {describe_stage(worst)}: the safety governor brakes "
                       f"on such data, so this run says more about this machine than about "
                       f"the swarm[/yellow]")
+        if launch.agents_per_process == 1 and len(sc.ids) > 2 * (os.cpu_count() or 1):
+            console.print(f"  {len(sc.ids)} agent processes on {os.cpu_count()} cores: "
+                          f"--agents-per-process runs several in one (docs/performance.md, "
+                          f"\"Agents sharing a process\")")
     if (missing := s["recording"]["states_missing"]):
         console.print(f"[yellow]warning: the recording lacks {sum(missing.values())} of the "
                       f"{s['recording']['states_published']} states published "

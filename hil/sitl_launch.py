@@ -46,6 +46,11 @@ class LaunchSettings:
                                "more: each group's ticks end sooner on a machine that runs "
                                "every agent, at one burst and wake-up more a period",
                                lo=1, hi=8)
+    agents_per_process: int = setting(1, doc="agents one process runs, each in turn every "
+                                      "period, on one Zenoh session (robots the world kills "
+                                      "keep a process of their own); 1: one process per "
+                                      "robot, as on robots; more: less CPU on a machine "
+                                      "with fewer cores than robots", lo=1, hi=64)
     age_bound: float = setting(0.05, unit="s", doc="the summary warns when an agent's "
                                "neighbour-state age p99 exceeds this", lo=0.0, open_lo=True,
                                hi=10.0)

@@ -3,6 +3,7 @@
 Each test runs ``boundswarm sitl`` as a child process and, pass or fail, ends it and every
 process it started (by PID, from the run manifest).
 """
+import dataclasses
 import json
 import os
 import signal
@@ -10,6 +11,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -318,6 +320,62 @@ def test_bad_agent_config_is_refused_naming_the_field(tmp_path):
                           cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert str(bad) in proc.stderr and "robot_id" in proc.stderr
+
+
+def test_configs_that_cannot_share_a_process_are_refused_naming_why(tmp_path):
+    """Two agent configs in one process need the same loop and session: a different tick
+    phase is named; so is a --stats count that does not match the --config count."""
+    from common.schema import to_toml
+    from hil.sitl import SitlOptions, agent_settings
+    sc = load_scenario(SCENARIOS / "sitl_small.toml")
+    paths = []
+    for index in (0, 1):
+        s = agent_settings(sc, index, "x", "tcp/127.0.0.1:7447", SitlOptions(), 14550)
+        if index:
+            s = dataclasses.replace(s, tick_phase=0.01)
+        paths.append(tmp_path / f"robot_{index}.toml")
+        paths[-1].write_text(to_toml(s))
+    cmd = [sys.executable, "-m", "hil.cli", "agent", "--config", str(paths[0]),
+           "--config", str(paths[1])]
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert "robots 1 and 2 cannot share a process: their tick_phase differ" in proc.stderr
+    proc = subprocess.run(cmd + ["--stats", str(tmp_path / "one.json")], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert "2 --config but 1 --stats" in proc.stderr
+
+
+def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
+    from hil.sitl import agent_hosts
+    settings = [SimpleNamespace(robot_id=i, tick_phase=(i % 2) * 0.01) for i in range(1, 10)]
+    hosts = agent_hosts(settings, 3, killed={4})
+    ids = [[s.robot_id for s in h] for h in hosts]
+    assert ids == [[4], [1, 3, 5], [7, 9], [2, 6, 8]]
+    assert [[s.robot_id for s in h] for h in agent_hosts(settings, 1, set())] == [
+        [i] for i in range(1, 10)]
+
+
+def test_agents_sharing_a_process_are_the_same_swarm(launch):
+    """--agents-per-process 2: robots 1 and 2 run in one process (one loop, one Zenoh
+    session: each hears the other through it), robot 3 in its own; each reports its own
+    statistics, the run is safe and converges, and the recording holds every state."""
+    run = launch("sitl_small.toml", "--agents-per-process", "2")
+    code, out = run.wait(timeout=120)
+    assert code == 0, out
+    pids = {r: v["pid"] for r, v in run.manifest()["robots"].items()}
+    assert pids["1"] == pids["2"] != pids["3"], pids
+    m = json.loads((run.out / "metrics.json").read_text())
+    s = m["sitl"]
+    assert s["agents_reporting"] == 3 and s["lost_processes"] == {}
+    assert m["collisions"] == 0 and m["converged"], out
+    assert s["recording"]["states_missing"] == {}, s["recording"]
+    for rid, together in ((1, 2), (2, 2), (3, 1)):
+        st = json.loads((run.out / "logs" / f"agent_{rid}.json").read_text())
+        assert st["agents_in_process"] == together
+        # both neighbours' states every period, less a few around the start
+        assert st["zenoh"]["states"]["accepted"] > 1.8 * st["loop"]["ticks"], st["zenoh"]
+    assert not [p for p in run.pids() if alive(p)]
 
 
 def test_one_ground_station_port_reaches_every_agent(launch):
