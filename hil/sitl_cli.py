@@ -155,8 +155,9 @@ def run(args: argparse.Namespace, console: Console) -> int:
                       f"the swarm[/yellow]")
         if launch.agents_per_process == 1 and len(sc.ids) > 2 * (os.cpu_count() or 1):
             console.print(f"  {len(sc.ids)} agent processes on {os.cpu_count()} cores: "
-                          f"--agents-per-process runs several in one (docs/performance.md, "
-                          f"\"Agents sharing a process\")")
+                          f"--tick-groups 4 --agents-per-process {-(-len(sc.ids) // 4)} runs "
+                          f"them in four (docs/performance.md, \"Agents sharing a "
+                          f"process\")")
     if (missing := s["recording"]["states_missing"]):
         console.print(f"[yellow]warning: the recording lacks {sum(missing.values())} of the "
                       f"{s['recording']['states_published']} states published "
