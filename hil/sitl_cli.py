@@ -59,6 +59,16 @@ def add_parser(sub: Subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def sharing_hint(robots: int, cores: int, agents_per_process: int) -> str | None:
+    """What to try when data came too old: with a process per robot and more than two
+    robots per core, four processes, each at its own quarter of the period."""
+    if agents_per_process > 1 or robots <= 2 * cores:
+        return None
+    return (f"{robots} agent processes on {cores} cores: --tick-groups 4 --agents-per-process "
+            f"{-(-robots // 4)} runs them in four (docs/performance.md, \"Agents sharing a "
+            f"process\")")
+
+
 def _percentiles(values: list[float | None]) -> dict[str, float | None]:
     import numpy as np
     a = np.asarray([v for v in values if v is not None], dtype=float)
@@ -153,11 +163,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
                       f"most of it in {describe_stage(worst)}: the safety governor brakes "
                       f"on such data, so this run says more about this machine than about "
                       f"the swarm[/yellow]")
-        if launch.agents_per_process == 1 and len(sc.ids) > 2 * (os.cpu_count() or 1):
-            console.print(f"  {len(sc.ids)} agent processes on {os.cpu_count()} cores: "
-                          f"--tick-groups 4 --agents-per-process {-(-len(sc.ids) // 4)} runs "
-                          f"them in four (docs/performance.md, \"Agents sharing a "
-                          f"process\")")
+        if hint := sharing_hint(len(sc.ids), os.cpu_count() or 1, launch.agents_per_process):
+            console.print(f"  {hint}")
     if (missing := s["recording"]["states_missing"]):
         console.print(f"[yellow]warning: the recording lacks {sum(missing.values())} of the "
                       f"{s['recording']['states_published']} states published "

@@ -356,6 +356,14 @@ def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
         [i] for i in range(1, 10)]
 
 
+def test_old_data_with_many_processes_per_core_suggests_sharing_them():
+    from hil.sitl_cli import sharing_hint
+    hint = sharing_hint(30, 2, 1)
+    assert hint is not None and "--tick-groups 4 --agents-per-process 8" in hint
+    assert sharing_hint(4, 2, 1) is None                # a process per robot keeps up
+    assert sharing_hint(30, 2, 8) is None               # already shared
+
+
 def test_agents_sharing_a_process_are_the_same_swarm(launch):
     """--agents-per-process 2: robots 1 and 2 run in one process (one loop, one Zenoh
     session: each hears the other through it), robot 3 in its own; each reports its own
