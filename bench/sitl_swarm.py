@@ -6,19 +6,21 @@
                                      [--sitl-args "--router-threads 1"]
 
 Each size runs ``boundswarm sitl`` on a grid formation (spacing 5 m, no obstacles) whose robots
-start scattered behind their places, with every agent a separate process (or N to a process:
-``--sitl-args "--agents-per-process N"``), the plant in one process, CAN over udp_multicast and
-Zenoh through the launcher's router, all on this machine. Reported per run: deadline misses
-(all agents), period jitter p50/p99/max over the agents' p50/p99/max, neighbour-state age
-(published -> used by the law): p50 over the agents' p50s, p99 over their p99s, and the worst
-agent's p99 with the stage that took most of its oldest 1 % (``pub``: publish -> router,
-``rtr``: router -> the agent's ring, ``held``: in the agent; ``-`` for a commit without the
-stages), steady CPU in the mission (from /proc, 3 s after the epoch until 2 s before the end; %
-of one core) per agent, of the plant, of the launcher (recorder, status, MAVLink router; and
-the router when the launcher hosts it), of the router process and in all (the machine has 200
-%), states missing from the recording (the agents' ticks, each publishing one, less the states
-in ``run.mcap``), and the safety/convergence outcome. Misses are the agents' overruns in the
-mission (t = 0 .. duration) and, apart, outside it (start-up and shut-down).
+start scattered behind their places, with the agents laid out as ``boundswarm sitl`` does by
+default (a process per robot up to 8 robots per core, beyond that shared processes in four tick
+groups; ``--sitl-args "--agents-per-process 1"`` keeps one per robot), the plant in one
+process, CAN over udp_multicast and Zenoh through the launcher's router, all on this machine.
+Reported per run: deadline misses (all agents), period jitter p50/p99/max over the agents'
+p50/p99/max, neighbour-state age (published -> used by the law): p50 over the agents' p50s, p99
+over their p99s, and the worst agent's p99 with the stage that took most of its oldest 1 %
+(``pub``: publish -> router, ``rtr``: router -> the agent's ring, ``held``: in the agent; ``-``
+for a commit without the stages), steady CPU in the mission (from /proc, 3 s after the epoch
+until 2 s before the end; % of one core) per agent, of the plant, of the launcher (recorder,
+status, MAVLink router; and the router when the launcher hosts it), of the router process and
+in all (the machine has 200 %), states missing from the recording (the agents' ticks, each
+publishing one, less the states in ``run.mcap``), and the safety/convergence outcome. Misses
+are the agents' overruns in the mission (t = 0 .. duration) and, apart, outside it (start-up
+and shut-down).
 
 ``--against REV`` runs REV's launcher (a temporary git worktree) and this checkout's in turn,
 and ``--against-python EXE`` this checkout under another interpreter (e.g. another venv's

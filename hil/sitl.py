@@ -53,7 +53,14 @@ from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
 from hil.scenario import Scenario
-from hil.sitl_launch import LaunchSettings, open_launcher_session, start_router, zenoh_runtime
+from hil.sitl_launch import (
+    LaunchSettings,
+    agent_layout,
+    machine_cores,
+    open_launcher_session,
+    start_router,
+    zenoh_runtime,
+)
 from transport.canbus import DEFAULT_GROUP
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 from transport.zenoh_link import Keys, Latest, Presence
@@ -104,6 +111,9 @@ class SitlRun:
     clock_step: float = 0.0     # s, the wall clock's largest step against the monotonic one
     cpu_steal: float | None = None   # share of the CPU the host stole in the mission
     cpu_busy: float | None = None    # share of the CPU the host gave that was used then
+    tick_groups: int = 1
+    agents_per_process: int = 1
+    agent_processes: int = 0
 
 
 def free_tcp_port() -> int:
@@ -155,7 +165,7 @@ def agent_settings(sc: Scenario, index: int, swarm: str, endpoint: str,
     # agents on a slow link are configured not to take live neighbours for silent ones
     timeouts = TimeoutSettings()
     timeouts = dataclasses.replace(timeouts, staleness=w.staleness(timeouts.staleness))
-    groups = opts.launch.tick_groups
+    groups, _ = agent_layout(len(sc.ids), machine_cores(), opts.launch)
     return AgentSettings(robot_id=rid, swarm=swarm, initial_pose=(x, y, theta),
                          tick_phase=(index % groups) * sc.control.period / groups,
                          control=sc.control, robot=sc.robot, can=can, timeouts=timeouts,
@@ -204,7 +214,10 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
     Zenoh takes it too if it has not started yet (the variable is read once per process)."""
     os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     out.mkdir(parents=True, exist_ok=True)
-    run = SitlRun()
+    groups, per = agent_layout(len(sc.ids), machine_cores(), opts.launch)
+    opts = dataclasses.replace(opts, launch=dataclasses.replace(
+        opts.launch, tick_groups=groups, agents_per_process=per))
+    run = SitlRun(tick_groups=groups, agents_per_process=per)
     swarm = _swarm_name(sc)
     keys = Keys(swarm)
     port = opts.zenoh_port or free_tcp_port()
@@ -265,12 +278,14 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                 child = children.start(
                     f"agent_{host[0].robot_id}" if len(host) == 1 else f"agents_{k}", args)
                 agents.update({s.robot_id: child for s in host})
+            run.agent_processes = len(hosts)
             _write_manifest(out, sc, settings, endpoint, swarm,
                             {"router": router_pid,
                              **{c.name: c.pid for c in children.children
                                 if c.name.startswith("plant")},
                              **{f"agent_{rid}": c.pid for rid, c in agents.items()}})
-            console.print(f"{len(agents)} agents starting ...")
+            console.print(f"{len(agents)} agents starting in {len(hosts)} processes "
+                          f"(up to {per} a process, {groups} tick group(s)) ...")
             if not wait_until(lambda: presence.alive() >= ids or children.failed(),
                               opts.startup_timeout) or children.failed():
                 missing = ids - presence.alive()

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import sys
 import time
 from pathlib import Path
@@ -100,7 +99,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from hil.scenario import load_scenario
     from hil.sim_cli import state_envelope
     from hil.sitl import SitlError, SitlOptions, run_sitl
-    from hil.sitl_launch import LaunchSettings
+    from hil.sitl_launch import LaunchSettings, machine_cores
     from hil.sitl_report import analyse_recording
     sc = load_scenario(args.scenario)
     if args.duration:
@@ -163,7 +162,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
                       f"most of it in {describe_stage(worst)}: the safety governor brakes "
                       f"on such data, so this run says more about this machine than about "
                       f"the swarm[/yellow]")
-        if hint := sharing_hint(len(sc.ids), os.cpu_count() or 1, launch.agents_per_process):
+        if hint := sharing_hint(len(sc.ids), machine_cores(), swarm.agents_per_process):
             console.print(f"  {hint}")
     if (missing := s["recording"]["states_missing"]):
         console.print(f"[yellow]warning: the recording lacks {sum(missing.values())} of the "
@@ -294,6 +293,9 @@ def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> d
         "cpu_steal": None if run.cpu_steal is None else round(run.cpu_steal, 3),
         "cpu_busy": None if run.cpu_busy is None else round(run.cpu_busy, 3),
         "agents_reporting": len(run.agent_stats),
+        "agent_processes": run.agent_processes,
+        "agents_per_process": run.agents_per_process,
+        "tick_groups": run.tick_groups,
         "lost_processes": run.lost,
         "killed_at": run.killed,
         "deadline_misses": sum(lp["overruns"] for lp in loops.values()),

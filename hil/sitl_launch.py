@@ -10,6 +10,7 @@ client of it (recorder, status, mission), like any ground station.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,24 +40,45 @@ class LaunchSettings:
                                    "their loops (10)", lo=0, hi=99)
     router_threads: int = setting(2, doc="Zenoh runtime worker threads of the router",
                                   lo=1, hi=16)
-    tick_groups: int = setting(1, doc="the agents tick in this many groups at phases spread "
+    tick_groups: int = setting(0, doc="the agents tick in this many groups at phases spread "
                                "over the period (the k-th robot at (k mod groups) / groups of "
                                "it); 1: all at phase 0, as robots with synchronised clocks "
                                "do, their states one burst a period (the least CPU in all); "
                                "more: each group's ticks end sooner on a machine that runs "
-                               "every agent, at one burst and wake-up more a period",
-                               lo=1, hi=8)
-    agents_per_process: int = setting(1, doc="agents one process runs, each in turn every "
+                               "every agent, at one burst and wake-up more a period; 0: "
+                               "auto (agent_layout)", lo=0, hi=8)
+    agents_per_process: int = setting(0, doc="agents one process runs, each in turn every "
                                       "period, on one Zenoh session (robots the world kills "
                                       "keep a process of their own); 1: one process per "
                                       "robot, as on robots; more: less CPU on a machine "
-                                      "with fewer cores than robots", lo=1, hi=64)
+                                      "with fewer cores than robots; 0: auto "
+                                      "(agent_layout)", lo=0, hi=64)
     age_bound: float = setting(0.05, unit="s", doc="the summary warns when an agent's "
                                "neighbour-state age p99 exceeds this", lo=0.0, open_lo=True,
                                hi=10.0)
 
     def __post_init__(self) -> None:
         validate(self)
+
+
+SHARE_ABOVE = 8     # robots per core beyond which the agents share processes (auto)
+
+
+def machine_cores() -> int:
+    """The cores this process may run on (its affinity: a container's or a taskset's)."""
+    return len(os.sched_getaffinity(0))
+
+
+def agent_layout(robots: int, cores: int, launch: LaunchSettings) -> tuple[int, int]:
+    """(tick groups, agents per process) for ``robots`` agents on ``cores``: each as
+    ``launch`` sets it, or where 0 (auto): one process per robot at one phase up to
+    SHARE_ABOVE robots per core; beyond (a process per robot would saturate the machine:
+    docs/performance.md, "Agents sharing a process"), four tick groups and 2 processes
+    per core (at least 4), the robots split evenly between them."""
+    shared = robots > SHARE_ABOVE * cores
+    groups = launch.tick_groups or (4 if shared else 1)
+    per = launch.agents_per_process or (-(-robots // max(4, 2 * cores)) if shared else 1)
+    return groups, per
 
 
 def router_config(endpoint: str) -> dict:

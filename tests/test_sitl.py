@@ -356,6 +356,19 @@ def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
         [i] for i in range(1, 10)]
 
 
+def test_the_agents_share_processes_by_default_only_beyond_eight_robots_a_core():
+    from hil.sitl_launch import LaunchSettings, agent_layout
+    auto = LaunchSettings()
+    assert agent_layout(16, 2, auto) == (1, 1)          # a process per robot, one phase
+    assert agent_layout(17, 2, auto) == (4, 5)          # four groups, 4 processes
+    assert agent_layout(50, 2, auto) == (4, 13)
+    assert agent_layout(64, 8, auto) == (1, 1)
+    assert agent_layout(100, 8, auto) == (4, 7)         # 16 processes on 8 cores
+    assert agent_layout(100, 4, auto) == (4, 13)        # 8 processes on 4 cores
+    assert agent_layout(50, 2, LaunchSettings(tick_groups=2)) == (2, 13)   # as given
+    assert agent_layout(50, 2, LaunchSettings(agents_per_process=1)) == (4, 1)
+
+
 def test_old_data_with_many_processes_per_core_suggests_sharing_them():
     from hil.sitl_cli import sharing_hint
     hint = sharing_hint(30, 2, 1)
