@@ -76,12 +76,6 @@ class AgentVehicle:
         return self.agent.set_param(name, value)
 
 
-def run_agent(settings: AgentSettings, stats_path: Path | None = None,
-              max_ticks: int | None = None) -> dict:
-    """Run one agent until a signal (or ``max_ticks``); returns its statistics."""
-    return run_agents([settings], [stats_path], max_ticks)[0]
-
-
 def check_group(group: Sequence[AgentSettings]) -> None:
     """Agents share one process only where they share its loop and its Zenoh session: the
     same period, tick grid, scheduling and Zenoh settings, and distinct robot IDs."""
@@ -99,6 +93,9 @@ def check_group(group: Sequence[AgentSettings]) -> None:
     ids = [s.robot_id for s in group]
     if len(set(ids)) != len(ids):
         raise ValueError(f"a robot ID appears twice among the configs: {ids}")
+    buses = [(s.can.interface, s.can.channel, s.can.port) for s in group]
+    if len(set(buses)) != len(buses):
+        raise ValueError(f"two robots on one CAN bus (interface, channel, port): {buses}")
 
 
 @dataclass
@@ -215,11 +212,12 @@ def run_agents(group: Sequence[AgentSettings], stats_paths: Sequence[Path | None
 
         gc.freeze()       # start-up objects are never scanned again: no long GC pause in a tick
         try:
-            loop.run(tick, max_ticks=max_ticks)
+            with ExitStack() as stops:      # every agent stops, whatever another one raises
+                for h in hosted:
+                    stops.callback(h.agent.shutdown)
+                stops.callback(notifier.stopping)       # first
+                loop.run(tick, max_ticks=max_ticks)
         finally:
-            notifier.stopping()
-            for h in hosted:
-                h.agent.shutdown()
             if realtime:
                 use_normal_scheduling()     # what is left is bookkeeping
         cpu, wall = time.process_time(), time.monotonic() - t0

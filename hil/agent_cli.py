@@ -15,7 +15,8 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--config", required=True, action="append",
                    help="agent config file (TOML); given again, the process runs each of "
                         "these agents in turn every period (a simulated swarm on fewer cores "
-                        "than robots: same period, tick grid and [zenoh] settings)")
+                        "than robots: the same period, tick grid, realtime_priority and "
+                        "[zenoh] settings, distinct robot IDs and CAN buses)")
     p.add_argument("--stats", action="append",
                    help="write loop and link statistics (JSON) at exit; one per --config")
     p.set_defaults(func=run)
@@ -28,6 +29,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if args.stats is not None and len(args.stats) != len(args.config):
         raise BadInput(f"{len(args.config)} --config but {len(args.stats)} --stats: give one "
                        f"--stats per --config, or none")
+    if args.stats is not None and len(set(args.stats)) != len(args.stats):
+        raise BadInput(f"--stats: a file given twice: {args.stats}")
     group = [load_settings(path) for path in args.config]
     try:
         check_group(group)

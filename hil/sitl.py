@@ -270,13 +270,14 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             agents: dict[int, Child] = {}
             hosts = agent_hosts(settings, opts.launch.agents_per_process,
                                 {k.robot for k in sc.world.kill})
-            for k, host in enumerate(hosts):
+            for host in hosts:
                 args = ["agent"]
                 for s in host:
                     args += ["--config", str(config_dir / f"robot_{s.robot_id}.toml"),
                              "--stats", str(out / "logs" / f"agent_{s.robot_id}.json")]
-                child = children.start(
-                    f"agent_{host[0].robot_id}" if len(host) == 1 else f"agents_{k}", args)
+                name = ("agent_" if len(host) == 1 else "agents_") + "-".join(
+                    str(s.robot_id) for s in host)
+                child = children.start(name, args)
                 agents.update({s.robot_id: child for s in host})
             run.agent_processes = len(hosts)
             _write_manifest(out, sc, settings, endpoint, swarm,
@@ -284,8 +285,9 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
                              **{c.name: c.pid for c in children.children
                                 if c.name.startswith("plant")},
                              **{f"agent_{rid}": c.pid for rid, c in agents.items()}})
-            console.print(f"{len(agents)} agents starting in {len(hosts)} processes "
-                          f"(up to {per} a process, {groups} tick group(s)) ...")
+            console.print(f"{len(agents)} agents starting" + (
+                f" in {len(hosts)} processes (up to {per} a process, {groups} tick groups: "
+                f"--agents-per-process, --tick-groups)" if per > 1 else "") + " ...")
             if not wait_until(lambda: presence.alive() >= ids or children.failed(),
                               opts.startup_timeout) or children.failed():
                 missing = ids - presence.alive()

@@ -60,11 +60,13 @@ def add_parser(sub: Subparsers) -> None:
 
 def sharing_hint(robots: int, cores: int, agents_per_process: int) -> str | None:
     """What to try when data came too old: with a process per robot and more than two
-    robots per core, four processes, each at its own quarter of the period."""
+    robots per core, shared processes as the launcher lays them out beyond 8 a core."""
+    from hil.sitl_launch import SHARED_GROUPS, shared_per_process
     if agents_per_process > 1 or robots <= 2 * cores:
         return None
-    return (f"{robots} agent processes on {cores} cores: --tick-groups 4 --agents-per-process "
-            f"{-(-robots // 4)} runs them in four (docs/performance.md, \"Agents sharing a "
+    per = shared_per_process(robots, cores, SHARED_GROUPS)
+    return (f"{robots} agent processes on {cores} cores: --agents-per-process {per} runs "
+            f"them in {-(-robots // per)} (docs/performance.md, \"Agents sharing a "
             f"process\")")
 
 

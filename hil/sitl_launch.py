@@ -10,6 +10,7 @@ client of it (recorder, status, mission), like any ground station.
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,14 +46,15 @@ class LaunchSettings:
                                "it); 1: all at phase 0, as robots with synchronised clocks "
                                "do, their states one burst a period (the least CPU in all); "
                                "more: each group's ticks end sooner on a machine that runs "
-                               "every agent, at one burst and wake-up more a period; 0: "
-                               "auto (agent_layout)", lo=0, hi=8)
+                               "every agent, at one burst and wake-up more a period; 0 "
+                               "(auto): 4 where agents share processes, else 1", lo=0, hi=8)
     agents_per_process: int = setting(0, doc="agents one process runs, each in turn every "
                                       "period, on one Zenoh session (robots the world kills "
                                       "keep a process of their own); 1: one process per "
                                       "robot, as on robots; more: less CPU on a machine "
-                                      "with fewer cores than robots; 0: auto "
-                                      "(agent_layout)", lo=0, hi=64)
+                                      "with fewer cores than robots; 0 (auto): 1 up to 8 "
+                                      "robots per core, beyond that about 2 processes per "
+                                      "core", lo=0, hi=64)
     age_bound: float = setting(0.05, unit="s", doc="the summary warns when an agent's "
                                "neighbour-state age p99 exceeds this", lo=0.0, open_lo=True,
                                hi=10.0)
@@ -62,6 +64,7 @@ class LaunchSettings:
 
 
 SHARE_ABOVE = 8     # robots per core beyond which the agents share processes (auto)
+SHARED_GROUPS = 4   # tick groups of shared processes (auto)
 
 
 def machine_cores() -> int:
@@ -69,15 +72,23 @@ def machine_cores() -> int:
     return len(os.sched_getaffinity(0))
 
 
+def shared_per_process(robots: int, cores: int, groups: int) -> int:
+    """Agents per process for about two processes per core (at least four), each tick
+    group's robots split evenly between its processes."""
+    per_group = math.ceil(max(4, 2 * cores) / groups)     # processes of a tick group
+    return math.ceil(math.ceil(robots / groups) / per_group)
+
+
 def agent_layout(robots: int, cores: int, launch: LaunchSettings) -> tuple[int, int]:
     """(tick groups, agents per process) for ``robots`` agents on ``cores``: each as
     ``launch`` sets it, or where 0 (auto): one process per robot at one phase up to
     SHARE_ABOVE robots per core; beyond (a process per robot would saturate the machine:
-    docs/performance.md, "Agents sharing a process"), four tick groups and 2 processes
-    per core (at least 4), the robots split evenly between them."""
-    shared = robots > SHARE_ABOVE * cores
-    groups = launch.tick_groups or (4 if shared else 1)
-    per = launch.agents_per_process or (-(-robots // max(4, 2 * cores)) if shared else 1)
+    docs/performance.md, "Agents sharing a process"), or where agents share processes
+    anyway, SHARED_GROUPS tick groups and :func:`shared_per_process`."""
+    given = launch.agents_per_process
+    shared = given > 1 or (given == 0 and robots > SHARE_ABOVE * cores)
+    groups = launch.tick_groups or (SHARED_GROUPS if shared else 1)
+    per = given or (shared_per_process(robots, cores, groups) if shared else 1)
     return groups, per
 
 

@@ -344,6 +344,16 @@ def test_configs_that_cannot_share_a_process_are_refused_naming_why(tmp_path):
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2, proc.stderr
     assert "2 --config but 1 --stats" in proc.stderr
+    proc = subprocess.run(cmd + ["--stats", str(tmp_path / "one.json")] * 2, cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "--stats: a file given twice" in proc.stderr, proc.stderr
+    # two robots on one bus would each read the other's drivers' frames
+    from agent.process import check_group
+    one, two = (agent_settings(sc, index, "x", "tcp/127.0.0.1:7447", SitlOptions(), 14550)
+                for index in (0, 1))
+    with pytest.raises(ValueError, match="two robots on one CAN bus"):
+        check_group([one, dataclasses.replace(two, can=one.can)])
+    check_group([one, two])
 
 
 def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
@@ -357,6 +367,8 @@ def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
 
 
 def test_the_agents_share_processes_by_default_only_beyond_eight_robots_a_core():
+    """(tick groups, agents per process): shared processes tick in four groups, about two
+    processes per core, each group's robots split evenly."""
     from hil.sitl_launch import LaunchSettings, agent_layout
     auto = LaunchSettings()
     assert agent_layout(16, 2, auto) == (1, 1)          # a process per robot, one phase
@@ -366,22 +378,25 @@ def test_the_agents_share_processes_by_default_only_beyond_eight_robots_a_core()
     assert agent_layout(100, 8, auto) == (4, 7)         # 16 processes on 8 cores
     assert agent_layout(100, 4, auto) == (4, 13)        # 8 processes on 4 cores
     assert agent_layout(50, 2, LaunchSettings(tick_groups=2)) == (2, 13)   # as given
-    assert agent_layout(50, 2, LaunchSettings(agents_per_process=1)) == (4, 1)
+    assert agent_layout(30, 3, auto) == (4, 4)          # 8 processes of 4 or fewer
+    assert agent_layout(50, 2, LaunchSettings(agents_per_process=1)) == (1, 1)
+    assert agent_layout(50, 2, LaunchSettings(tick_groups=1)) == (1, 13)
+    assert agent_layout(9, 2, LaunchSettings(agents_per_process=3)) == (4, 3)
 
 
 def test_old_data_with_many_processes_per_core_suggests_sharing_them():
     from hil.sitl_cli import sharing_hint
     hint = sharing_hint(30, 2, 1)
-    assert hint is not None and "--tick-groups 4 --agents-per-process 8" in hint
+    assert hint is not None and "--agents-per-process 8 runs them in 4" in hint
     assert sharing_hint(4, 2, 1) is None                # a process per robot keeps up
     assert sharing_hint(30, 2, 8) is None               # already shared
 
 
 def test_agents_sharing_a_process_are_the_same_swarm(launch):
-    """--agents-per-process 2: robots 1 and 2 run in one process (one loop, one Zenoh
+    """--agents-per-process 2 at one phase: robots 1 and 2 run in one process (one loop, one Zenoh
     session: each hears the other through it), robot 3 in its own; each reports its own
     statistics, the run is safe and converges, and the recording holds every state."""
-    run = launch("sitl_small.toml", "--agents-per-process", "2")
+    run = launch("sitl_small.toml", "--agents-per-process", "2", "--tick-groups", "1")
     code, out = run.wait(timeout=120)
     assert code == 0, out
     pids = {r: v["pid"] for r, v in run.manifest()["robots"].items()}
