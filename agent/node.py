@@ -54,7 +54,7 @@ from agent.neighbours import InRange, in_range
 from agent.odometry import Odometry, Pose
 from agent.pose import PoseFusion
 from agent.progress import PROGRESS, ProgressWatch, tolerance
-from agent.trail import Splits, Trail
+from agent.trail import Trail
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import FixPort, MotorPort, SwarmPort
 from common.schema import ConfigError, Param
@@ -477,22 +477,18 @@ class Agent:
         reach = s.sensing_range + disc[2] * staleness
         speed_up, lag = self._commit[:2]
         ahead = []
-        stamp = math.nan                 # neighbours stamped alike share this robot's trail
-        moved: Splits = ()
         for rid, rec in neighbours.items():
             m = rec.msg
             dx, dy = m.x - x, m.y - y
             if rid == me or dx * dx + dy * dy > reach * reach:
                 continue
             age = now_w - m.stamp
-            if m.stamp != stamp:
-                stamp, moved = m.stamp, self.trail.splits(m.stamp, age, SPLITS)
-            floor, top = neighbour_floor(-dx, -dy, m.v, age, moved[0][0], a, disc[1], disc[2],
-                                         staleness, speed_up, lag)
-            ahead.append((floor - 0.5 * grow, rid, -dx, -dy, age, moved, top + grow))
+            floor, top = neighbour_floor(-dx, -dy, m.v, age, self.trail.path_since(m.stamp),
+                                         a, disc[1], disc[2], staleness, speed_up, lag)
+            ahead.append((floor - 0.5 * grow, rid, -dx, -dy, age, top + grow))
         ahead.sort()                     # by the floor (then by id: the ids differ)
         bind = binding(gaps, frame)
-        for floor, rid, rel_x, rel_y, age, moved, top in ahead:
+        for floor, rid, rel_x, rel_y, age, top in ahead:
             if floor >= bind:            # it cannot bind: is it one the law may pass?
                 lx, ly = law_xy.get(rid, (math.inf, math.inf))
                 lx, ly = lx - x, ly - y
@@ -500,6 +496,9 @@ class Agent:
                     halves[rid] = top
                     continue
             m = neighbours[rid].msg
+            # this robot's motion since the stamp, split as the governor takes it: only for
+            # the discs computed (neighbours stamped alike share it: Trail.splits)
+            moved = self.trail.splits(m.stamp, age, SPLITS)
             full, half, east, north, claim = neighbour_radii(
                 rel_x, rel_y, m.theta, m.v, m.u, age, moved, a, disc[1], half_base,
                 *disc[2:], *self._commit)

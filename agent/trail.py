@@ -61,6 +61,14 @@ class Trail:
             cut = bisect_right(self._t, t - self.span) - 1
             del self._t[:cut], self._path[:cut], self._x[:cut], self._y[:cut]
 
+    def path_since(self, start: float) -> float:
+        """The path [m] to the newest position from the last position recorded at or
+        before ``start`` [s] (the first, if none): :meth:`splits`'s first value, alone."""
+        t, path = self._t, self._path
+        if not path:
+            return 0.0
+        return path[-1] - path[max(bisect_right(t, start) - 1, 0)]
+
     def splits(self, start: float, span: float, pieces: int) -> Splits:
         """This robot's motion over each piece k = 0 .. ``pieces`` - 1 of the time from
         ``start`` [s], ``span`` [s] long, split evenly, as

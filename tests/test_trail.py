@@ -73,3 +73,18 @@ def test_the_splits_asked_again_are_the_same_until_the_next_record():
     assert first[:2] == ([1.0, 1.0], [0.0, 0.0])
     trail.record(0.2, 3.0, 0.0)
     assert trail.splits(0.0, 0.1, 2)[:2] == ([3.0, 3.0], [2.0, 2.0])
+
+
+def test_path_since_is_the_first_value_of_the_splits_bit_for_bit():
+    """The governor's cheap bound takes path_since for every neighbour and the splits only
+    for the discs it computes: both must agree exactly, at and between recorded times."""
+    import random
+    rng = random.Random(3)
+    trail = Trail(1.0)
+    assert trail.path_since(0.0) == trail.splits(0.0, 0.1, 4)[0][0] == 0.0
+    t = 0.0
+    for _ in range(300):
+        t += rng.choice((0.01, 0.02, 0.013))
+        trail.record(t, rng.uniform(-5, 5), rng.uniform(-5, 5))
+        for start in (t - 0.5, t - 0.02, t - rng.uniform(0, 0.7), t, t - 0.013):
+            assert trail.path_since(start) == trail.splits(start, t - start, 4)[0][0]
