@@ -12,10 +12,13 @@ see the same machine; the differences of the medians and of the 99th percentiles
 the governor adds to a tick. ``--robot`` takes a robot profile (default: the SITL's
 defaults). ``--data-age`` stamps the neighbours' states that many seconds before the tick
 (default 0: stamped at the tick, where the governor has no data age to count and its
-discs take their quickest path; on a network they are some milliseconds old).
+discs take their quickest path; on a network they are some milliseconds old), and
+``--stamp-spread`` spreads the stamps over that many seconds more (robots stamp at their own
+tick's start: on a network no two stamps are alike, and the governor then splits its own
+motion for each neighbour it computes a disc for).
 
     .venv/bin/python bench/agent_tick.py [--ticks 3000] [--governor-cost] [--robot FILE]
-                                         [--data-age S]
+                                         [--data-age S] [--stamp-spread S]
 """
 from __future__ import annotations
 
@@ -54,13 +57,14 @@ def make_agent(clock: SimClock, net: SharedSwarm, governor: bool,
 
 
 def timed_tick(agent: Agent, others: list, angles: np.ndarray, k: int,
-               clock: SimClock, age: float) -> int:
-    """Publish the neighbours round ``agent``, their states stamped ``age`` [s] ago, tick
-    it; the tick's wall time [ns]."""
+               clock: SimClock, age: float, spread: float = 0.0) -> int:
+    """Publish the neighbours round ``agent``, their states stamped ``age`` [s] ago (the
+    n-th of N ``spread`` n / N [s] more), tick it; the tick's wall time [ns]."""
     x, y = agent.odometry.pose[:2]
     for n, (port, a) in enumerate(zip(others, angles)):
         r = 3.0 + 0.2 * n
-        port.publish(StateMsg(n + 2, k + 1, clock.wall() - age, x + r * math.cos(a),
+        stamp = clock.wall() - age - spread * n / len(others)
+        port.publish(StateMsg(n + 2, k + 1, stamp, x + r * math.cos(a),
                               y + r * math.sin(a), a, 1.0, 0.1, 0.0, 0.0, 0,
                               StateFlags.ARMED))
     t0 = time.perf_counter_ns()
@@ -76,6 +80,9 @@ def main() -> None:
     ap.add_argument("--robot", metavar="FILE", help="robot profile (robots/*.toml)")
     ap.add_argument("--data-age", type=float, default=0.0, metavar="S",
                     help="the neighbours' states this old when the agent ticks [s]")
+    ap.add_argument("--stamp-spread", type=float, default=0.0, metavar="S",
+                    help="the neighbours' stamps spread over S [s] more age (robots stamp "
+                         "at their own tick's start: on a LAN no two stamps are alike)")
     args = ap.parse_args()
     staleness = TimeoutSettings().staleness
     if not 0.0 <= args.data_age < staleness:
@@ -104,7 +111,7 @@ def main() -> None:
         order.reverse()                  # neither agent always ticks first
         for name in order:
             times[name].append(timed_tick(agents[name], others, angles, k, clock,
-                                          args.data_age))
+                                          args.data_age, args.stamp_spread))
         clock.now += 0.02
     stats = {}
     for name, t in times.items():
