@@ -202,8 +202,11 @@ def run_agents(group: Sequence[AgentSettings], stats_paths: Sequence[Path | None
                 agent.tick(k, deadline)
                 h.link.poll(clock.monotonic())          # bounded, never blocks
                 h.stats.record(start - deadline, clock.monotonic() - start)
-            if all((fb := h.agent.last_feedback) is not None and fb.closed_loop
-                   and h.agent.failsafe is None for h in hosted):
+            if not notifier.enabled:            # not under systemd: nothing to tell it
+                return
+            if not notifier.ready_sent and all(
+                    (fb := h.agent.last_feedback) is not None and fb.closed_loop
+                    and h.agent.failsafe is None for h in hosted):
                 notifier.ready(f"robot {ids} armed")
             on_time = loop.stats.overruns == overruns[0]
             overruns[0] = loop.stats.overruns
