@@ -44,10 +44,10 @@ class Trail:
         self._path: list[float] = []        # m, cumulative, from the first position
         self._x: list[float] = []
         self._y: list[float] = []
-        # the last splits asked for, until the next record: neighbours whose states carry
-        # the same stamp (robots ticking on a common grid) share them
-        self._asked: tuple[float, float, int] | None = None
-        self._answer: Splits = ()
+        # the splits given since the last record, by the recorded positions they were
+        # taken from: neighbours whose pieces start and end between the same records (the
+        # same stamp, or stamps within a period of the trail) share them
+        self._given: dict[tuple[int, ...], Splits] = {}
 
     def record(self, t: float, x: float, y: float) -> None:
         """The position (x, y) [m] at time t [s] (non-decreasing)."""
@@ -56,7 +56,7 @@ class Trail:
         self._path.append((self._path[-1] if self._path else 0.0) + step)
         self._x.append(x)
         self._y.append(y)
-        self._asked = None
+        self._given = {}
         if self._t[0] < t - 2.0 * self.span:      # drop the old half now and then
             cut = bisect_right(self._t, t - self.span) - 1
             del self._t[:cut], self._path[:cut], self._x[:cut], self._y[:cut]
@@ -77,10 +77,8 @@ class Trail:
         the first at or after its end (the newest, if none); the displacement east and
         north [m] to the newest position from each of those two. All zero before any.
         Then the rows the governor derives from those (agent.governor.trail_motion). The
-        lists are shared with the next caller asking the same: read, do not change."""
-        asked = (start, span, pieces)
-        if asked == self._asked:
-            return self._answer
+        lists are shared with every caller whose pieces fall between the same recorded
+        positions until the next record: read, do not change."""
         t, path, xs, ys = self._t, self._path, self._x, self._y
         if not path:
             return with_motion(tuple([0.0] * pieces for _ in range(6)))
@@ -93,8 +91,12 @@ class Trail:
             before.append(max(i - 1, 0))
             after.append(min(i - 1 if i > 0 and t[i - 1] == edge else i, newest))
         first, end = before[:-1], after[1:]
+        key = tuple(first + end)
+        answer = self._given.get(key)
+        if answer is not None:
+            return answer
         answer = with_motion(([last - path[i] for i in first], [last - path[j] for j in end],
                               [x - xs[i] for i in first], [y - ys[i] for i in first],
                               [x - xs[j] for j in end], [y - ys[j] for j in end]))
-        self._asked, self._answer = asked, answer
+        self._given[key] = answer
         return answer

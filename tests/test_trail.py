@@ -75,6 +75,25 @@ def test_the_splits_asked_again_are_the_same_until_the_next_record():
     assert trail.splits(0.0, 0.1, 2)[:2] == ([3.0, 3.0], [2.0, 2.0])
 
 
+def test_stamps_between_the_same_records_share_their_splits_and_others_do_not():
+    """Neighbours stamped at different times whose pieces start and end between the same
+    recorded positions get the same splits (as a trail asked only once gives them); a
+    piece that crosses a record makes other splits."""
+    def walked():
+        trail = Trail(span=1.0)
+        for k in range(6):
+            trail.record(0.02 * k, 0.3 * k, 0.01 * k * k)
+        return trail
+    trail = walked()
+    first = trail.splits(0.0301, 0.0699, 4)
+    shared = trail.splits(0.0312, 0.0688, 4)          # every piece's ends: the same records
+    assert shared is first
+    assert walked().splits(0.0312, 0.0688, 4) == first
+    other = trail.splits(0.0402, 0.0598, 4)            # its first piece starts after 0.04
+    assert other is not first
+    assert other == walked().splits(0.0402, 0.0598, 4) != first
+
+
 def test_path_since_is_the_first_value_of_the_splits_bit_for_bit():
     """The governor's cheap bound takes path_since for every neighbour and the splits only
     for the discs it computes: both must agree exactly, at and between recorded times."""
