@@ -37,7 +37,9 @@ class Odometry:
         self.pose = (float(x), float(y), float(theta))
 
     def update(self, pos_right_rev: float, pos_left_rev: float) -> Pose:
-        """Advance with new encoder positions [rev]; the first call only sets the origin."""
+        """Advance with new encoder positions [rev]; the first call only sets the origin.
+        Taken as plain floats, whatever number type the drivers' port gives."""
+        pos_right_rev, pos_left_rev = float(pos_right_rev), float(pos_left_rev)
         if self._last is not None:
             self.pose = odometry_step(*self.pose, pos_right_rev - self._last[0],
                                       pos_left_rev - self._last[1], self.wheel_radius,

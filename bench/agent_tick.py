@@ -56,7 +56,7 @@ def make_agent(clock: SimClock, net: SharedSwarm, governor: bool,
     return agent
 
 
-def timed_tick(agent: Agent, others: list, angles: np.ndarray, k: int,
+def timed_tick(agent: Agent, others: list, angles: list[float], k: int,
                clock: SimClock, age: float, spread: float = 0.0) -> int:
     """Publish the neighbours round ``agent``, their states stamped ``age`` [s] ago (the
     n-th of N ``spread`` n / N [s] more), tick it; the tick's wall time [ns]."""
@@ -98,7 +98,8 @@ def main() -> None:
     net.mission_msg = MissionMsg(1, clock.wall(), clock.wall(), (40.0, 0.0), (2.0, 0.0), 0.0,
                                  ids, offsets)
     others = [net.port(int(r)) for r in ids[1:]]
-    angles = np.linspace(0.0, 2.0 * math.pi, NEIGHBOURS, endpoint=False)
+    # plain floats, as a robot decodes them from the network
+    angles = np.linspace(0.0, 2.0 * math.pi, NEIGHBOURS, endpoint=False).tolist()
     net.obstacle_msgs[1] = ObstaclesMsg(1, 1, clock.wall(),
                                         np.array([[5.0, 5.0], [-5.0, 4.0], [6.0, -3.0]]),
                                         np.array([1.0, 1.5, 0.8]))

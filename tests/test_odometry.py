@@ -26,3 +26,16 @@ def test_odometry_from_encoders_matches_the_plant_truth():
         est = odo.update(*enc[0])
     assert est[:2] == pytest.approx(truth[0, :2], abs=1e-6)
     assert math.cos(est[2] - truth[0, 2]) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_the_pose_stays_plain_floats_whatever_numbers_the_drivers_give():
+    """A port that hands numpy scalars (the fake drivers of the tests) must not turn the
+    pose into them: every operation of the law and the governor would then run through
+    numpy's scalar type, several times slower than on a robot's decoded CAN frames."""
+    odo = Odometry(0.05, 0.3, (0.0, 0.0, 0.0))
+    odo.update(np.float64(0.0), np.float32(0.0))
+    pose = odo.update(np.float64(1.25), np.float32(0.5))
+    assert [type(v) for v in pose] == [float, float, float]
+    plain = Odometry(0.05, 0.3, (0.0, 0.0, 0.0))
+    plain.update(0.0, 0.0)
+    assert pose == plain.update(1.25, 0.5)              # the same values, bit for bit
