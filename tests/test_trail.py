@@ -107,3 +107,14 @@ def test_path_since_is_the_first_value_of_the_splits_bit_for_bit():
         trail.record(t, rng.uniform(-5, 5), rng.uniform(-5, 5))
         for start in (t - 0.5, t - 0.02, t - rng.uniform(0, 0.7), t, t - 0.013):
             assert trail.path_since(start) == trail.splits(start, t - start, 4)[0][0]
+
+
+def test_a_boundary_at_a_recorded_time_takes_that_record_both_ways():
+    """A piece starting exactly at a recorded time starts from that position; one ending
+    exactly at a recorded time ends at that position, not the next."""
+    trail = Trail(span=10.0)
+    for k in range(5):
+        trail.record(0.25 * k, float(k * k), 0.0)        # path 0, 1, 4, 9, 16
+    rows = trail.splits(0.25, 0.5, 2)                     # boundaries 0.25, 0.5, 0.75
+    assert rows[0] == [15.0, 12.0]                        # since the records at 0.25, 0.5
+    assert rows[1] == [12.0, 7.0]                         # since the records at 0.5, 0.75
