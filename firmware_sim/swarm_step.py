@@ -264,13 +264,16 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 gaps = fold_hazard(gaps, frame, o_x[q] - x, o_y[q] - y, o_r[q] + a + grow,
                                    -math.inf, 0.0)
             n_c = 0
+            walked_age, walked = math.nan, 0.0
             for q in range(m):
                 j = nbr_j[q]
                 if not truth and seen[j, 2] == NONE:
                     continue
-                age = t - view[j, 5]      # this robot's path since: own_motion's first
-                walked = (path[step % ring, i, 2]
-                          - path[at_or_before(step, age, period, ring), i, 2])
+                age = t - view[j, 5]
+                if age != walked_age:     # this robot's path since: own_motion's first
+                    walked_age = age
+                    walked = (path[step % ring, i, 2]
+                              - path[at_or_before(step, age, period, ring), i, 2])
                 floor, top = neighbour_floor(x - view[j, 0], y - view[j, 1], view[j, 3], age,
                                              walked, a, p.accel, top_speed, staleness,
                                              p.speed_up, lag)
