@@ -63,6 +63,8 @@ def test_arming_and_commanded_velocities_reach_the_encoders(rig):
     fb = rig.host.feedback()
     assert fb.pos_rev[0] - pos0[0] == pytest.approx(5.0, abs=0.06)
     assert fb.pos_rev[1] - pos0[1] == pytest.approx(-3.0, abs=0.04)
+    # decoded frames give plain floats, as the agent's law and governor take them
+    assert {type(v) for v in (*fb.pos_rev, *fb.vel_rev_s)} == {float}
 
 
 def test_velocity_limit_and_saturation_keep_the_curvature(rig):
