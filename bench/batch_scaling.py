@@ -29,6 +29,7 @@ import time
 import types
 from collections.abc import Iterator
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
@@ -133,12 +134,8 @@ def control_timed(spent: dict[str, float]) -> Iterator[None]:
 
     timed = types.SimpleNamespace(**vars(kernels))
     timed.control = control
-    original = compiled.kernels
-    compiled.kernels = lambda: timed          # what simulate() looks up
-    try:
+    with mock.patch.object(compiled, "kernels", lambda: timed):   # what simulate() looks up
         yield
-    finally:
-        compiled.kernels = original
 
 
 def main() -> None:

@@ -10,8 +10,10 @@ poll, and the p99 as a share of the control period.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import time
+from typing import Any
 
 import numpy as np
 from pymavlink import mavutil
@@ -44,11 +46,13 @@ class MovingVehicle:
     def set_mode(self, mode: AgentMode) -> str | None:
         return None
 
-    def params(self) -> ControlParams:
-        return self.control
+    def param(self, name: str) -> float:
+        return float(getattr(self.control, name))
 
-    def apply_params(self, params: ControlParams) -> None:
-        self.control = params
+    def set_param(self, name: str, value: float) -> str | None:
+        changes: dict[str, Any] = {name: float(value)}
+        self.control = dataclasses.replace(self.control, **changes)
+        return None
 
 
 def free_udp_port() -> int:

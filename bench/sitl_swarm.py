@@ -128,6 +128,7 @@ def run_once(n: int, args: argparse.Namespace, tmp: Path, checkout: Path,
     proc = subprocess.Popen(cmd, cwd=checkout, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True, env={**os.environ, "PYTHONUNBUFFERED": "1",
                                             "PYTHONPATH": str(checkout)})
+    assert proc.stdout is not None                 # (stdout=PIPE)
     lines, cpu = [], {}
     try:
         for line in proc.stdout:
