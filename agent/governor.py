@@ -116,34 +116,28 @@ def _travel(speed: float, age: float, accel: float, up: float, lag: float,
     speed-up at most ``accel``)."""
     if math.isinf(accel):
         return top_speed * age
-    return _paired(_STILL, age, speed, 0.0, 0.0, accel, 0.0, top_speed, up, lag, up)[0]
+    return _all_round(_STILL, age, speed, 0.0, accel, top_speed, up, lag)
 
 
-def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
-            a: float, accel: float, half_base: float, top_speed: float, up: float,
-            lag: float, turn_up: float,
-            sight: tuple[float, float, float, float, float, float] = _BLIND
-            ) -> tuple[float, float, float]:
-    """(around, reach, rho) [m] of a neighbour heard from on wheels of finite ``accel``
-    (arguments as :func:`neighbour_radii`, ``up`` its speed-up at most ``accel``,
-    ``turn_up`` its wheels' half difference's at most ``up``): over the
-    splits of the ``age`` (>= 0) paired with this robot's ``trail``, the largest of a +
-    how far it can have travelled all round + this robot's share of its own motion, and
-    of a + rho (:func:`swerve`; inf when ``half_base`` <= 0) + that share, and rho at the
-    age itself
-    (:func:`_own_share`, seen along ``sight``: this robot's distance [m] to the report's
-    position and the unit vector toward it, its distance to the report's segment and the
-    unit vector toward the segment's far end). Both formulas are written here once, in
-    one loop, as the agent runs it for every neighbour every period."""
-    around = reach = -math.inf
-    rho_age = math.inf
+def _all_round(trail: FloatRows, age: float, speed: float, a: float, accel: float,
+               top_speed: float, up: float, lag: float,
+               sight: tuple[float, float, float, float, float, float] = _BLIND) -> float:
+    """around [m] of a neighbour heard from on wheels of finite ``accel`` (arguments as
+    :func:`neighbour_radii`, ``up`` its speed-up at most ``accel``): over the splits of
+    the ``age`` (>= 0) paired with this robot's ``trail``, the largest of a + how far it
+    can have travelled all round by the split's end + this robot's share of its own motion
+    since the split's start (:func:`_own_share`, seen along ``sight``: this robot's
+    distance [m] to the report's position and the unit vector toward it, then its
+    distance to the report's segment and the unit vector toward the segment's far end,
+    which :func:`_capsule` uses)."""
+    around = -math.inf
     paths = trail[0]
     splits = len(paths)
-    dist, sx, sy, off, ex, ey = sight
-    speed, half_turn = abs(speed), 0.5 * abs(turn_rate)
+    dist, sx, sy = sight[0], sight[1], sight[2]
+    speed = abs(speed)
     half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
     accel_lag2 = accel_lag * lag
-    # the last split first: its sums are often the largest, and a share is at most the
+    # the last split first: its sum is often the largest, and a share is at most the
     # path since its split's start, so a split whose sum cannot beat the largest so far
     # needs no share
     for k in range(splits - 1, -1, -1):
@@ -152,6 +146,40 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
         t = age * (k + 1) / splits
         t = 0.0 if 0.0 > t else t
         grow = _grow(t, speed, top_speed, half_accel, half_up, accel_lag, accel_lag2)
+        # each bound summed as its term is, so that it rounds no lower
+        path = paths[k]
+        if a + grow + path <= around:
+            continue
+        motion = ((path, trail[2][k], trail[3][k], trail[6][k], trail[4][k], trail[5][k],
+                   trail[7][k], trail[8][k]) if path > 0.0 else _NO_MOTION)
+        bound = a + grow + _own_share(motion, sx, sy, sx, sy, dist, grow)
+        around = bound if bound > around else around
+    return around
+
+
+def _capsule(trail: FloatRows, age: float, speed: float, turn_rate: float, a: float,
+             accel: float, half_base: float, up: float, lag: float, turn_up: float,
+             sight: tuple[float, float, float, float, float, float] = _BLIND
+             ) -> tuple[float, float]:
+    """(reach, rho) [m] of a neighbour heard from on wheels of finite ``accel`` (arguments
+    as :func:`_all_round`, ``turn_up`` its wheels' half difference's speed-up at most
+    ``up``): over the splits of the ``age`` paired as there, the largest of a + rho
+    (:func:`swerve`; inf when ``half_base`` <= 0) by the split's end + this robot's share
+    of its own motion since the split's start toward the report's segment; and rho at the
+    age itself."""
+    reach = -math.inf
+    rho_age = math.inf
+    paths = trail[0]
+    splits = len(paths)
+    sx, sy, off, ex, ey = sight[1], sight[2], sight[3], sight[4], sight[5]
+    speed, half_turn = abs(speed), 0.5 * abs(turn_rate)
+    half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
+    accel_lag2 = accel_lag * lag
+    for k in range(splits - 1, -1, -1):       # as _all_round
+        if k + 1 < splits and trail[9][k] != 0.0:
+            continue
+        t = age * (k + 1) / splits
+        t = 0.0 if 0.0 > t else t
         rho = math.inf
         if half_base > 0.0:
             t2 = t * t
@@ -163,25 +191,20 @@ def _paired(trail: FloatRows, age: float, speed: float, turn_rate: float,
             rho = turned if turned < rho else rho
         if k == splits - 1:
             rho_age = rho
-        # each bound summed as its term is, so that it rounds no lower
         path = paths[k]
-        if a + grow + path <= around and a + rho + path <= reach:
+        if a + rho + path <= reach:
             continue
         motion = ((path, trail[2][k], trail[3][k], trail[6][k], trail[4][k], trail[5][k],
                    trail[7][k], trail[8][k]) if path > 0.0 else _NO_MOTION)
-        if a + grow + path > around:
-            bound = a + grow + _own_share(motion, sx, sy, sx, sy, dist, grow)
-            around = bound if bound > around else around
-        if a + rho + path > reach:
-            bound = a + rho + _own_share(motion, sx, sy, ex, ey, off, rho)
-            reach = bound if bound > reach else reach
-    return around, reach, rho_age
+        bound = a + rho + _own_share(motion, sx, sy, ex, ey, off, rho)
+        reach = bound if bound > reach else reach
+    return reach, rho_age
 
 
 def _grow(t: float, speed: float, top_speed: float, half_accel: float, half_up: float,
           accel_lag: float, accel_lag2: float) -> float:
     """How far [m] a neighbour last reported at ``speed`` [m/s] (>= 0) can have travelled
-    all round ``t`` [s] (>= 0) later (:func:`_paired`; half its ramp and speed-up, its ramp
+    all round ``t`` [s] (>= 0) later (:func:`_all_round`; half its ramp and speed-up, its ramp
     times the lag and that times the lag again): its wheels within a ramp of the command it
     reported for the lag, then its speed grown by at most its speed-up since (or, more
     loosely, the ramp all along), and never faster than ``top_speed``."""
@@ -201,7 +224,7 @@ def neighbour_floor(rel_x: float, rel_y: float, speed: float, age: float, path: 
     is silent or its wheels change speed at once (no bound: the disc is cheap there).
 
     Heard from, its claim is at most a + how far it can have travelled all round by now
-    + this robot's path since the stamp (:func:`_paired`, at the age), and the claim's
+    + this robot's path since the stamp (:func:`_all_round`, at the age), and the claim's
     disc leaves this robot half the distance to the reported position beyond that
     (:func:`neighbour_radii` takes the claim that much smaller as its centre comes nearer
     along the report's segment); behind it, the stop strip leaves more free distance,
@@ -357,10 +380,20 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     sight = (dist, -rel_x / near, -rel_y / near, off, far_x / far, far_y / far)
     up = accel if accel < speed_up else speed_up
     turn_up = up if up < turn_up else turn_up
-    around, reach, rho = _paired(trail, age, speed, turn_rate, a, accel, half_base,
-                                 top_speed, up, lag, turn_up, sight)
-    beyond, within = off - reach, dist - around
-    claim = off - (within if within > beyond else beyond)
+    reach, rho = _capsule(trail, age, speed, turn_rate, a, accel, half_base, up, lag,
+                          turn_up, sight)
+    beyond = off - reach
+    # the all-round bound leaves more room than the capsule only where even its least
+    # value, its last split's travel without this robot's share, does; else it is not
+    # computed (its splits' shares are half the disc's cost)
+    t = age * len(trail[0]) / len(trail[0])
+    t, accel_lag = (0.0 if 0.0 > t else t), accel * lag
+    least = a + _grow(t, abs(speed), top_speed, 0.5 * accel, 0.5 * up, accel_lag,
+                      accel_lag * lag)
+    if dist - least > beyond:
+        within = dist - _all_round(trail, age, speed, a, accel, top_speed, up, lag, sight)
+        beyond = within if within > beyond else beyond
+    claim = off - beyond
     own, to, ahead_x, ahead_y = _ahead(rel_x, rel_y, dist, hx, hy, speed, turn_rate, age,
                                        a, accel, half_base, up, lag, turn_up, stop_time,
                                        rho, 0.5 * (off - claim))
@@ -553,9 +586,8 @@ def swerve(speed: float, turn_rate: float, age: float, accel: float, half_base: 
     if math.isinf(accel) or half_base <= 0.0:
         return math.inf
     up = min(speed_up, accel)
-    # (a top speed of 0: the all-round travel it bounds is not wanted here)
-    return _paired(_STILL, age, speed, turn_rate, 0.0, accel, half_base, 0.0, up, lag,
-                   min(turn_up, up))[1]
+    return _capsule(_STILL, age, speed, turn_rate, 0.0, accel, half_base, up, lag,
+                    min(turn_up, up))[0]
 
 
 def silent_radius(speed: float, turn: float, a: float, accel: float, top_speed: float,

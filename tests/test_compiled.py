@@ -113,6 +113,6 @@ def test_the_governor_s_helpers_are_compiled_into_their_callers():
     """The governor's helpers run per neighbour per robot: they are inlined into their
     callers, the law's own functions are not (docs/performance.md)."""
     k = compiled.kernels()
-    assert k._paired.targetoptions["inline"] == "always"
+    assert k._capsule.targetoptions["inline"] == "always"
     assert k._own_share.targetoptions["inline"] == "always"
     assert k.law_step.targetoptions["inline"] == "never"

@@ -11,8 +11,11 @@ from agent.governor import (
     MOVING_PAD,
     NO_GAPS,
     SPLITS,
+    _all_round,
+    _capsule,
+    _grow,
+    _nearest_on_report,
     _own_share,
-    _paired,
     approach,
     binding,
     braking_speed,
@@ -38,6 +41,14 @@ from hil.robot_profile import load_robot_profile
 from hil.scenario import load_scenario
 
 A, ACCEL, TOP, STALE, STOP = 1.0, 2.0, 3.0, 0.5, 0.12
+
+
+def _paired(trail, age, speed, turn_rate, a, accel, half_base, top_speed, up, lag, turn_up,
+            sight=(0.0,) * 6):
+    """(around, reach, rho) of a neighbour's splits: both bounds, each over all splits."""
+    return (_all_round(trail, age, speed, a, accel, top_speed, up, lag, sight),
+            *_capsule(trail, age, speed, turn_rate, a, accel, half_base, up, lag, turn_up,
+                      sight))
 
 
 def test_braking_speed_uses_exactly_the_free_distance():
@@ -657,6 +668,38 @@ def test_a_split_is_skipped_only_where_its_sum_cannot_round_above_the_largest():
     alone = [_paired(tuple([row[k]] for row in trail), 0.4 * (k + 1) / SPLITS, *args)
              for k in range(SPLITS)]
     assert got[:2] == (max(r[0] for r in alone), max(r[1] for r in alone))
+
+
+@settings(max_examples=400, deadline=None)
+@given(rel_x=st.floats(-6.0, 6.0), rel_y=st.floats(-6.0, 6.0),
+       heading=st.floats(-math.pi, math.pi), speed=st.floats(-3.0, 3.0),
+       turn_rate=st.floats(-2.0, 2.0), age=st.floats(0.0, 0.45), own=st.floats(0.0, 3.0),
+       angle=st.floats(-math.pi, math.pi))
+@example(rel_x=-4.0, rel_y=0.5, heading=0.0, speed=3.0, turn_rate=0.0, age=0.4, own=0.0,
+         angle=0.0)                        # driving at this robot: the all-round bound counts
+def test_the_claim_is_that_of_both_bounds_over_every_split(rel_x, rel_y, heading, speed,
+                                                           turn_rate, age, own, angle):
+    """neighbour_radii leaves the all-round bound out where even its least value leaves
+    no more room than the capsule; its claim is, bit for bit, that of both bounds taken
+    over every split."""
+    trail = straight(own, math.cos(angle), math.sin(angle), age, SPLITS)
+    speed_up, lag = 1.0, 0.04
+    hx, hy = math.cos(heading), math.sin(heading)
+    _, _, off, seg_x, seg_y = _nearest_on_report(rel_x, rel_y, hx, hy, speed, age)
+    dist = math.sqrt(rel_x * rel_x + rel_y * rel_y)
+    far_x, far_y = seg_x - rel_x, seg_y - rel_y
+    far = max(math.sqrt(far_x * far_x + far_y * far_y), 1e-9)
+    near = max(dist, 1e-9)
+    sight = (dist, -rel_x / near, -rel_y / near, off, far_x / far, far_y / far)
+    around, reach, _ = _paired(trail, age, speed, turn_rate, A, ACCEL, 0.4, TOP, speed_up,
+                               lag, speed_up, sight)
+    within, beyond = dist - around, off - reach
+    want = off - (within if within > beyond else beyond)
+    got = neighbour_radii(rel_x, rel_y, heading, speed, turn_rate, age, trail, A, ACCEL, 0.4,
+                          TOP, STALE, STOP, 3.5, speed_up, lag, speed_up)[4]
+    assert got == want
+    assert _grow(age, abs(speed), TOP, 0.5 * ACCEL, 0.5 * speed_up, ACCEL * lag,
+                 ACCEL * lag * lag) + A <= around      # the least value the shortcut takes
 
 
 def test_a_static_hazard_abeam_does_not_limit_but_a_moving_one_does():
