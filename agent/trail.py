@@ -44,9 +44,9 @@ class Trail:
         self._path: list[float] = []        # m, cumulative, from the first position
         self._x: list[float] = []
         self._y: list[float] = []
-        # the splits given since the last record, by the recorded positions they were
-        # taken from: neighbours whose pieces start and end between the same records (the
-        # same stamp, or stamps within a period of the trail) share them
+        # the splits given since the last record, by where their pieces' boundaries fall
+        # among the recorded times: neighbours whose pieces start and end between the same
+        # records (the same stamp, or stamps within a period of the trail) share them
         self._given: dict[tuple[int, ...], Splits] = {}
 
     def record(self, t: float, x: float, y: float) -> None:
@@ -82,21 +82,22 @@ class Trail:
         t, path, xs, ys = self._t, self._path, self._x, self._y
         if not path:
             return with_motion(tuple([0.0] * pieces for _ in range(6)))
-        last, newest, x, y = path[-1], len(path) - 1, xs[-1], ys[-1]
-        # each boundary's last position at or before it, and first at or after it
-        before, after = [], []
+        # where each boundary falls among the recorded times: the index past the last
+        # time at or before it, negated where a time equals it
+        key = []
         for m in range(pieces + 1):
             edge = start + span * m / pieces
             i = bisect_right(t, edge)
-            before.append(max(i - 1, 0))
-            after.append(min(i - 1 if i > 0 and t[i - 1] == edge else i, newest))
-        first, end = before[:-1], after[1:]
-        key = tuple(first + end)
-        answer = self._given.get(key)
+            key.append(-i if i and t[i - 1] == edge else i)
+        answer = self._given.get(tuple(key))
         if answer is not None:
             return answer
+        # each boundary's last position at or before it, and first at or after it
+        last, newest, x, y = path[-1], len(path) - 1, xs[-1], ys[-1]
+        first = [(-i if i < 0 else i) - 1 if i else 0 for i in key[:-1]]
+        end = [-i - 1 if i < 0 else (i if i < newest else newest) for i in key[1:]]
         answer = with_motion(([last - path[i] for i in first], [last - path[j] for j in end],
                               [x - xs[i] for i in first], [y - ys[i] for i in first],
                               [x - xs[j] for j in end], [y - ys[j] for j in end]))
-        self._given[key] = answer
+        self._given[tuple(key)] = answer
         return answer
