@@ -475,33 +475,34 @@ class Agent:
         law_xy = {rid: (nx, ny) for rid, nx, ny in zip(near.fresh_id, near.fresh_x,
                                                         near.fresh_y)}
         reach = s.sensing_range + disc[2] * staleness
+        reach *= reach
         speed_up, lag = self._commit[:2]
+        accel, top_speed, path_since = disc[1], disc[2], self.trail.path_since
         ahead = []
         for rid, rec in neighbours.items():
             m = rec.msg
             dx, dy = m.x - x, m.y - y
-            if rid == me or dx * dx + dy * dy > reach * reach:
+            if rid == me or dx * dx + dy * dy > reach:
                 continue
             age = now_w - m.stamp
-            floor, top = neighbour_floor(-dx, -dy, m.v, age, self.trail.path_since(m.stamp),
-                                         a, disc[1], disc[2], staleness, speed_up, lag)
-            ahead.append((floor - 0.5 * grow, rid, -dx, -dy, age, top + grow))
+            floor, top = neighbour_floor(-dx, -dy, m.v, age, path_since(m.stamp), a, accel,
+                                         top_speed, staleness, speed_up, lag)
+            ahead.append((floor - 0.5 * grow, rid, -dx, -dy, age, top + grow, m))
         ahead.sort()                     # by the floor (then by id: the ids differ)
         bind = binding(gaps, frame)
-        for floor, rid, rel_x, rel_y, age, top in ahead:
+        splits, rest = self.trail.splits, (*disc[2:], *self._commit)
+        for floor, rid, rel_x, rel_y, age, top, m in ahead:
             if floor >= bind:            # it cannot bind: is it one the law may pass?
                 lx, ly = law_xy.get(rid, (math.inf, math.inf))
                 lx, ly = lx - x, ly - y
                 if not may_pass(math.sqrt(lx * lx + ly * ly), top - a, self._law_params):
                     halves[rid] = top
                     continue
-            m = neighbours[rid].msg
             # this robot's motion since the stamp, split as the governor takes it: only for
             # the discs computed (neighbours stamped alike share it: Trail.splits)
-            moved = self.trail.splits(m.stamp, age, SPLITS)
+            moved = splits(m.stamp, age, SPLITS)
             full, half, east, north, claim = neighbour_radii(
-                rel_x, rel_y, m.theta, m.v, m.u, age, moved, a, disc[1], half_base,
-                *disc[2:], *self._commit)
+                rel_x, rel_y, m.theta, m.v, m.u, age, moved, a, accel, half_base, *rest)
             gaps = fold_hazard(gaps, frame, m.x + east - x, m.y + north - y, full + grow,
                                half + grow, 1.0 if age <= staleness else 0.0)
             bind = binding(gaps, frame)
