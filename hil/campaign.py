@@ -37,6 +37,7 @@ from rich.console import Console
 
 from hil.campaign_spec import CampaignSpec, Run, write_copy
 from hil.exit_codes import BadInput
+from hil.host_cpu import machine_cores
 
 RUNS, TIMINGS, SESSIONS, PARQUET, LOCK = ("runs.jsonl", "timings.jsonl", "sessions.jsonl",
                                           "runs.parquet", ".lock")
@@ -201,7 +202,7 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
             client.close()
         return
     cluster = LocalCluster(
-        n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+        n_workers=workers or machine_cores(), threads_per_worker=1, processes=True,
         host="127.0.0.1", dashboard_address=None, worker_dashboard_address=None,
         scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
         env={"NUMBA_NUM_THREADS": "1"}, silence_logs=logging.ERROR)

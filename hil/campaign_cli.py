@@ -30,7 +30,8 @@ def add_parser(sub: Subparsers) -> None:
                                  "spec); with --replay, the run folder to write")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=_workers,
-                       help="local worker processes, one thread each (default: the CPUs)")
+                       help="local worker processes, one thread each (default: the cores this "
+                            "process may run on)")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="run on this existing Dask cluster instead of a local one")
     p.add_argument("--robot", metavar="FILE", action="append",

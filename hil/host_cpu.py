@@ -15,12 +15,19 @@ so a saturated swarm misses periods in all its agents at once, once a second.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 PROC_STAT = Path("/proc/stat")
 RT_RUNTIME = Path("/proc/sys/kernel/sched_rt_runtime_us")
 RT_PERIOD = Path("/proc/sys/kernel/sched_rt_period_us")
+
+
+def machine_cores() -> int:
+    """The cores this process may run on (its affinity: a container's or a taskset's), which
+    can be fewer than the machine has (``os.cpu_count``)."""
+    return len(os.sched_getaffinity(0))
 
 
 @dataclass(frozen=True)

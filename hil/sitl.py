@@ -48,7 +48,7 @@ from agent.settings import AgentSettings, SensingSettings, TimeoutSettings
 from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
 from common.vocabulary import StateFlags
-from hil.host_cpu import busy_share, cpu_times, steal_share
+from hil.host_cpu import busy_share, cpu_times, machine_cores, steal_share
 from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
@@ -56,7 +56,6 @@ from hil.scenario import Scenario
 from hil.sitl_launch import (
     LaunchSettings,
     agent_layout,
-    machine_cores,
     open_launcher_session,
     start_router,
     zenoh_runtime,

@@ -97,11 +97,12 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from common.schema import ConfigError, section_from_args
     from hil import run_folder
     from hil.figures import draw_figures
+    from hil.host_cpu import machine_cores
     from hil.robot_profile import SITL_DEFAULT, load_robot_profile
     from hil.scenario import load_scenario
     from hil.sim_cli import state_envelope
     from hil.sitl import SitlError, SitlOptions, run_sitl
-    from hil.sitl_launch import LaunchSettings, machine_cores
+    from hil.sitl_launch import LaunchSettings
     from hil.sitl_report import analyse_recording
     sc = load_scenario(args.scenario)
     if args.duration:

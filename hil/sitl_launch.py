@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -65,11 +64,6 @@ class LaunchSettings:
 
 SHARE_ABOVE = 8     # robots per core beyond which the agents share processes (auto)
 SHARED_GROUPS = 4   # tick groups of shared processes (auto)
-
-
-def machine_cores() -> int:
-    """The cores this process may run on (its affinity: a container's or a taskset's)."""
-    return len(os.sched_getaffinity(0))
 
 
 def shared_per_process(robots: int, cores: int, groups: int) -> int:

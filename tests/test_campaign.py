@@ -574,3 +574,34 @@ def test_the_realistic_campaign_has_over_a_thousand_runs(families):
     assert profiles == {"heavy", "cart", "fast", "sporty"}
     killed = sum(bool(r.description.get("kill_at")) for r in spec.runs) / len(spec.runs)
     assert 0.25 < killed < 0.42
+
+
+def test_a_local_cluster_has_a_worker_per_core_this_process_may_run_on(monkeypatch):
+    """By default a worker per core of this process's affinity (a container's or a
+    taskset's share), not one per CPU of the machine, which would oversubscribe it."""
+    import distributed
+
+    from hil import campaign
+    made: dict = {}
+
+    class Cluster:
+        def __init__(self, **options):
+            made.update(options)
+
+        def close(self):
+            made["closed"] = True
+
+    class Client:
+        def __init__(self, *args, **options):
+            pass
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(distributed, "LocalCluster", Cluster)
+    monkeypatch.setattr(distributed, "Client", Client)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3})
+    assert os.cpu_count() != 1          # else this test could not tell the two apart
+    with campaign.dask_client(None, None):
+        pass
+    assert made["n_workers"] == 1 and made["closed"]
