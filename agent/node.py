@@ -475,14 +475,14 @@ class Agent:
         law_xy = {rid: (nx, ny) for rid, nx, ny in zip(near.fresh_id, near.fresh_x,
                                                         near.fresh_y)}
         reach = s.sensing_range + disc[2] * staleness
-        reach *= reach
+        reach2 = reach * reach
         speed_up, lag = self._commit[:2]
         accel, top_speed, path_since = disc[1], disc[2], self.trail.path_since
         ahead = []
         for rid, rec in neighbours.items():
             m = rec.msg
             dx, dy = m.x - x, m.y - y
-            if rid == me or dx * dx + dy * dy > reach:
+            if rid == me or dx * dx + dy * dy > reach2:
                 continue
             age = now_w - m.stamp
             floor, top = neighbour_floor(-dx, -dy, m.v, age, path_since(m.stamp), a, accel,
