@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 from types import MappingProxyType
+from typing import Mapping
 
 import numpy as np
 from helpers import SimClock
 
-from common.payloads import Received
+from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.vocabulary import WheelFeedback
 
 
@@ -28,27 +29,29 @@ class MirrorMotor:
         self.pos += self.vel * (now - self.last)
         self.last = now
 
-    def arm(self):
+    def arm(self) -> None:
         self.armed = True
 
-    def disarm(self):
+    def disarm(self) -> None:
         self.advance()
         self.armed = False
         self.vel[:] = 0.0
 
-    def command(self, right, left):
+    def command(self, right: float, left: float) -> None:
         self.advance()
         self.commands += 1
         if self.armed:
             self.vel[:] = (right, left)
 
-    def feedback(self):
+    def feedback(self) -> WheelFeedback | None:
         self.advance()
         if self.silent:
             return None
-        return WheelFeedback(tuple(self.pos), tuple(self.vel), 0.0, self.armed, self.errors)
+        # numpy scalars, as drivers may hand them (the agent must take them as floats)
+        pos, vel = (self.pos[0], self.pos[1]), (self.vel[0], self.vel[1])
+        return WheelFeedback(pos, vel, 0.0, self.armed, self.errors)
 
-    def clear_errors(self):
+    def clear_errors(self) -> None:
         self.errors = ()
 
 
@@ -57,9 +60,9 @@ class SharedSwarm:
 
     def __init__(self, clock: SimClock):
         self.clock = clock
-        self.states: dict = {}
-        self.mission_msg = None
-        self.obstacle_msgs: dict = {}
+        self.states: dict[int, Received[StateMsg]] = {}
+        self.mission_msg: MissionMsg | None = None
+        self.obstacle_msgs: dict[int, ObstaclesMsg] = {}
 
     def port(self, robot_id: int) -> "SwarmView":
         return SwarmView(self, robot_id)
@@ -68,18 +71,18 @@ class SharedSwarm:
 class SwarmView:
     def __init__(self, net: SharedSwarm, robot_id: int):
         self.net, self.robot_id = net, robot_id
-        self.published = []
+        self.published: list[StateMsg] = []
 
-    def publish(self, state):
+    def publish(self, state: StateMsg) -> None:
         self.published.append(state)
         self.net.states[state.robot_id] = Received(state, self.net.clock.wall())
 
-    def neighbours(self):
+    def neighbours(self) -> Mapping[int, Received[StateMsg]]:
         return MappingProxyType({k: v for k, v in self.net.states.items()
                                  if k != self.robot_id})
 
-    def obstacles(self):
+    def obstacles(self) -> ObstaclesMsg | None:
         return self.net.obstacle_msgs.get(self.robot_id)
 
-    def mission(self):
+    def mission(self) -> MissionMsg | None:
         return self.net.mission_msg

@@ -6,7 +6,7 @@
 """
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -14,6 +14,15 @@ from agent.config import ControlParams, RobotParams
 from agent.governor import NO_GAPS, fold_hazard, frame_limits
 from agent.law import LawMemory, LawParams, governor_frame, last_velocity, law_step
 from firmware_sim import compiled
+
+if TYPE_CHECKING:
+    from typing import TypeAlias
+
+    from agent.avoidance import FloatSeq
+
+    # the law's seven per-neighbour and per-obstacle columns, lists or arrays
+    Columns: TypeAlias = tuple[FloatSeq, FloatSeq, FloatSeq, FloatSeq, FloatSeq, FloatSeq,
+                               FloatSeq]
 
 IMPLS = ("interpreted", "compiled")
 IMPL = "interpreted"
@@ -42,8 +51,10 @@ class Output(NamedTuple):
 def single(pose, ref, nbrs=(), obstacles=()) -> Case:
     """One robot at ``pose`` with reference ``ref``, neighbours [(x, y)], obstacles
     [((cx, cy), r)]."""
-    return Case(tuple(map(float, pose)), tuple(map(float, ref)),
-                [tuple(map(float, q)) for q in nbrs],
+    x, y, theta = map(float, pose)
+    ref_x, ref_y = map(float, ref)
+    return Case((x, y, theta), (ref_x, ref_y),
+                [(float(qx), float(qy)) for qx, qy in nbrs],
                 [(float(c[0]), float(c[1]), float(r)) for c, r in obstacles])
 
 
@@ -54,14 +65,15 @@ def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None 
     mem = mem or LawMemory()
     held = case.held if case.held is not None else [float(mem.avoiding)] * len(case.nbrs)
     grow = case.grow if case.grow is not None else [0.0] * len(case.nbrs)
-    columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs], held, grow,
-               [o[0] for o in case.obstacles], [o[1] for o in case.obstacles],
-               [o[2] for o in case.obstacles])
+    columns: Columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs], held, grow,
+                        [o[0] for o in case.obstacles], [o[1] for o in case.obstacles],
+                        [o[2] for o in case.obstacles])
     lp = LawParams.of(params, robot)
     law = law_step
     if IMPL == "compiled":            # arrays, as the batch simulator passes them
         law = compiled.kernels().law_step
-        columns = tuple(np.array(c, dtype=float) for c in columns)
+        nx, ny, nh, ng, ox, oy, orad = (np.array(c, dtype=float) for c in columns)
+        columns = (nx, ny, nh, ng, ox, oy, orad)
     v, u, mode, governed, memory = law(*case.pose, *case.ref, 0.0, 0.0, *columns,
                                        limits(case, mem, lp, params.period), mem, lp,
                                        params.period)

@@ -3,7 +3,7 @@ import math
 
 import numpy as np
 import pytest
-from fakes import MirrorMotor, SharedSwarm
+from fakes import MirrorMotor, SharedSwarm, SwarmView
 from helpers import SimClock, governor_discs
 
 from agent.config import ControlParams, RobotParams
@@ -33,8 +33,12 @@ def make_swarm(poses, offsets, center0=(0.0, 0.0), velocity=(0.0, 0.0), epoch_in
 
 def run(clock, agents, seconds):
     loop = FixedRateLoop(ControlParams().period, clock)
-    loop.run(lambda k, d: [a.tick(k, d) for a in agents],
-             max_ticks=int(seconds / loop.period))
+
+    def tick(k: int, d: float) -> None:
+        for a in agents:
+            a.tick(k, d)
+
+    loop.run(tick, max_ticks=int(seconds / loop.period))
     return loop
 
 
@@ -265,15 +269,15 @@ def test_a_cart_brakes_for_a_dead_robot_through_its_governor():
                                            [(30.0, 0.0), (9.0, 0.0)])
     cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
                        drive_latency=0.02)
-    agent = Agent(dataclasses.replace(agent.s, robot=cart), MirrorMotor(clock), agent.swarm,
-                  clock)
+    view: SwarmView = agent.swarm
+    agent = Agent(dataclasses.replace(agent.s, robot=cart), MirrorMotor(clock), view, clock)
     dead.tick()                                  # publishes once, then never again
     agent.arm()
     agent.set_mode(AgentMode.FORMATION)
     closest, flagged = np.inf, False
     for _ in range(400):
         agent.tick()
-        flagged = flagged or bool(agent.swarm.published[-1].flags & StateFlags.GOVERNED)
+        flagged = flagged or bool(view.published[-1].flags & StateFlags.GOVERNED)
         clock.now += 0.02
         closest = min(closest, np.hypot(*(np.subtract(agent.odometry.pose[:2], (9.0, 0.0)))))
     assert closest > agent.s.control.a

@@ -101,12 +101,12 @@ def test_robots_starting_inside_each_others_avoidance_region_separate():
 
 def sparse_field(rng, n, kind, c=4.0, b=2.0):
     """Robots left of a band of obstacles (gaps >= 2c), formation ending past the band."""
-    obstacles = []
+    obstacles: list[tuple[np.ndarray, float]] = []
     while len(obstacles) < 6:
         centre, r = rng.uniform([-10, -25], [25, 25]), rng.uniform(1.0, 3.5)
         if all(np.linalg.norm(centre - oc) - r - orr >= 2 * c for oc, orr in obstacles):
             obstacles.append((centre, r))
-    poses = []
+    poses: list[np.ndarray] = []
     while len(poses) < n:
         p = rng.uniform([-75, -30], [-35, 30])
         if all(np.linalg.norm(p - q[:2]) >= b for q in poses):
@@ -143,7 +143,7 @@ def test_deterministic():
 
 def test_progress_is_reported():
     sc = load_scenario(SCENARIOS / "paper.toml")
-    seen = []
+    seen: list[float] = []
     simulate(sc.ids, sc.poses, sc.formation, sc.obstacles, sc.control, sc.robot,
              SimOptions(duration=1.0), progress=seen.append)
     assert seen[0] == 0.0 and seen[-1] == 1.0 and seen == sorted(seen) and len(seen) > 10
@@ -162,7 +162,7 @@ def test_bad_options_are_refused():
 def test_cluttered_fields_never_collide(seed):
     """Obstacle gaps below 2b: best effort for convergence, but no collision ever."""
     rng = np.random.default_rng(seed)
-    obstacles = []
+    obstacles: list[tuple[np.ndarray, float]] = []
     while len(obstacles) < 14:
         centre, r = rng.uniform([-15, -20], [25, 20]), rng.uniform(1.0, 3.0)
         gaps = [np.linalg.norm(centre - oc) - r - orr for oc, orr in obstacles]

@@ -521,7 +521,9 @@ def test_smoke_report_has_groups_and_intervals_and_its_replay_writes_a_run_folde
     figures = {p.name for p in (smoke_local / "figures").iterdir()}
     assert {"rates_family_kind.png", "rates_profile.png", "min_distance.png",
             "min_clearance.png"} <= figures
-    command = re.search(r"`(boundswarm campaign \S+ --replay \w+ --out \S+)`", report)[1]
+    found = re.search(r"`(boundswarm campaign \S+ --replay \w+ --out \S+)`", report)
+    assert found is not None, "the report names no replay command"
+    command = found[1]
     argv = shlex.split(command)[1:]
     key = argv[argv.index("--replay") + 1]
     argv[argv.index("--out") + 1] = str(tmp_path / "replay")

@@ -131,7 +131,7 @@ class _SentAt(can.BusABC):
 
     def __init__(self, clock):
         self.clock, self.sent, self.channel_info = clock, [], "sent-at"
-        super().__init__(channel=None)
+        super().__init__(channel="sent-at")       # BusABC does not use it
 
     def send(self, msg, timeout=None):
         self.sent.append(self.clock())
@@ -187,6 +187,7 @@ def test_replay_refuses_commands_while_an_armed_agent_writes(tmp_path):
         while proc.poll() is None:
             host.command(0.5, 0.5)
             time.sleep(0.02)
+        assert proc.stderr is not None
         assert proc.returncode == 2 and "armed agent" in proc.stderr.read()
     finally:
         host_bus.shutdown()
@@ -215,6 +216,7 @@ while True:
     time.sleep(0.02)
 """], cwd=ROOT, stdout=subprocess.PIPE)
     try:
+        assert agent.stdout is not None
         assert agent.stdout.readline().strip() == b"armed"
         watch = open_bus("udp_multicast", group, port=port)
         try:

@@ -22,7 +22,7 @@ def test_udp_multicast_hears_peers_but_not_itself():
     # a python-can tool on the same bus (e.g. can.viewer): it hears both and is heard
     tool = can.Bus(interface="udp_multicast", channel="ff11::b5:9", port=port, hop_limit=0)
     try:
-        assert isinstance(a, EchoFilteredBus)
+        assert isinstance(a, EchoFilteredBus) and isinstance(b, EchoFilteredBus)
         sent_at = time.time()
         a.send(can.Message(arbitration_id=0x02D, data=bytes(8), is_extended_id=False))
         got = b.recv(2.0)
@@ -112,11 +112,13 @@ def test_host_and_drivers_in_two_processes_over_udp_multicast():
             host.command(3.0, 3.0)
             time.sleep(0.02)
         fb = host.feedback()
+        assert fb is not None
         assert fb.closed_loop and fb.vel_rev_s == pytest.approx((3.0, 3.0), abs=0.01)
         assert fb.age < 0.1
         # stop commanding: the drivers' watchdog trips and the host names it
         time.sleep(0.4)
         fb = host.feedback()
+        assert fb is not None
         assert "right: WATCHDOG_TIMER_EXPIRED" in fb.errors
         assert host.ignored.get("dlc", 0) == 0
     finally:
@@ -127,6 +129,7 @@ def test_host_and_drivers_in_two_processes_over_udp_multicast():
         except subprocess.TimeoutExpired:
             child.kill()
             child.wait()
+    assert child.stdout is not None
     assert child.returncode in (0, -15), child.stdout.read().decode()
 
 
@@ -140,6 +143,7 @@ def test_a_stray_datagram_on_the_bus_port_is_skipped_not_fatal():
             s.sendto(b"not a CAN frame", ("ff11::b5:8", port))
         peer.send(can.Message(arbitration_id=0x02D, data=bytes(8), is_extended_id=False))
         got = bus.recv(2.0)
+        assert isinstance(bus, EchoFilteredBus)
         assert got is not None and got.arbitration_id == 0x02D and bus.malformed == 1
     finally:
         bus.shutdown()
@@ -152,12 +156,13 @@ def test_a_send_port_that_is_another_bus_port_neither_blocks_nor_steals_from_it(
     opened = [open_bus("udp_multicast", "ff11::b5:6", port=free_port("udp6"))]
     try:
         x = opened[0]
+        assert isinstance(x, EchoFilteredBus)
         port = x._tx.getsockname()[1]
         opened.append(y := open_bus("udp_multicast", "ff11::b5:6", port=port))
         opened.append(peer := open_bus("udp_multicast", "ff11::b5:6", port=port))
         for i in range(100):
             peer.send(can.Message(arbitration_id=i, data=bytes(8), is_extended_id=False))
-        got = []
+        got: list[int] = []
         while len(got) < 100 and (msg := y.recv(2.0)) is not None:
             got.append(msg.arbitration_id)
         assert got == list(range(100))

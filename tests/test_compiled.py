@@ -96,7 +96,10 @@ def test_the_cache_follows_every_source(tmp_path, monkeypatch):
     files = [tmp_path / "law.py", tmp_path / "step.py"]
     for f in files:
         f.write_text("x = 1\n")
-    modules = [types.SimpleNamespace(__file__=str(f)) for f in files]
+    modules = []
+    for f in files:                             # stand-ins for the law's modules
+        modules.append(module := types.ModuleType(f.stem))
+        module.__file__ = str(f)
     first = compiled.cache_dir(modules, "0.60")
     assert first.parent == tmp_path and compiled.cache_dir(modules, "0.60") == first
     files[0].write_text("x = 2\n")

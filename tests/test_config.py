@@ -120,7 +120,9 @@ def test_flags_derived_from_a_section():
     parser = argparse.ArgumentParser()
     add_arguments(parser, RobotParams, prefix="robot-")
     helps = {a.dest: a.help for a in parser._actions}
-    assert "[rev/s]" in helps["robot_wheel_speed_limit"] and "10.0" in parser.format_help()
+    speed_help = helps["robot_wheel_speed_limit"]
+    assert speed_help is not None and "[rev/s]" in speed_help
+    assert "10.0" in parser.format_help()
     assert section_from_args(RobotParams, parser.parse_args([]), "robot-") == RobotParams()
     args = parser.parse_args(["--robot-wheel-ramp", "200", "--robot-wheel-radius", "0.1"])
     assert section_from_args(RobotParams, args, "robot-") == RobotParams(wheel_ramp=200.0,

@@ -37,8 +37,9 @@ def test_quick_run_shows_no_bar():
 
 
 def test_summary_table_formats_metrics():
-    console = Console(file=io.StringIO(), width=100)
+    out = io.StringIO()
+    console = Console(file=out, width=100)
     console.print(summary_table({"robots": 9, "converged": False, "convergence_time": None,
                                  "min_pair_distance": 1.97123, "stuck_robots": [3, 4]}, "t"))
-    text = console.file.getvalue()
+    text = out.getvalue()
     assert "NO" in text and "1.97" in text and "3, 4" in text and "-" in text

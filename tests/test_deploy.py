@@ -289,6 +289,7 @@ def test_tampered_or_replayed_records_on_a_robot_link_deliver_nothing(bundles, r
                 session.close()
         link.close()
     seqs = [StateMsg.decode(p).seq for p in got]
+    assert first_attacked is not None
     assert all(p == sent[s] for p, s in zip(got, seqs))         # nothing altered
     assert len(seqs) == len(set(seqs))                           # nothing twice
     assert len([s for s in seqs if s < first_attacked]) >= 15    # the link worked before

@@ -50,8 +50,10 @@ def cases(draw):
     if draw(st.booleans()):
         centre = obs[0] if obs else ((0.0, 0.0), 0.0)
         wheels = st.floats(-6.0, 6.0)
-        mem = LawMemory(*draw(point), True, draw(st.booleans()),
-                        draw(st.sampled_from([-1, 0, 1])), *centre[0], centre[1],
+        prev_x, prev_y = draw(point)
+        (centre_x, centre_y), radius = centre
+        mem = LawMemory(prev_x, prev_y, True, draw(st.booleans()),
+                        draw(st.sampled_from([-1, 0, 1])), centre_x, centre_y, radius,
                         draw(wheels), draw(wheels), draw(st.sampled_from([-1, 0, 1])))
     grow = [draw(st.floats(0.0, 3.0)) for _ in nbrs]
     hazards = [(q[0], q[1], -math.inf, P.a + g, 1.0) for q, g in zip(nbrs, grow)] + \
@@ -143,7 +145,9 @@ def test_braking_takes_the_whole_ramp_though_speeding_up_does_not():
     standing and asked to go, it gains 2 m/s^2 x T."""
     ground = 2 * math.pi * SPORTY.wheel_radius
     moving = LawMemory(wheel_r=5.0 / ground, wheel_l=5.0 / ground)
-    args = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, [], [], [], [], [], [], [], NO_GAPS)
+    none: list[float] = []                       # no neighbours, no obstacles
+    args = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, none, none, none, none, none, none, none,
+            NO_GAPS)
     v, _, _, _, _ = law_step(*args, moving, LP_SPORTY, P.period)
     assert v == pytest.approx(5.0 - SPORTY.a_max * P.period)
     v, _, _, _, _ = law_step(0.0, 0.0, 0.0, 5.0, 0.0, *args[5:], LawMemory(), LP_SPORTY,

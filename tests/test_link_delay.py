@@ -92,6 +92,12 @@ def fds() -> set[tuple[str, str]]:
     return out
 
 
+def bound(relay: DelayRelay) -> tuple[str, int]:
+    """The address ``relay`` listens on, once started."""
+    assert relay.address is not None, "relay not started"
+    return relay.address
+
+
 def wait_until(cond, timeout: float = 5.0) -> bool:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -103,7 +109,7 @@ def wait_until(cond, timeout: float = 5.0) -> bool:
 
 def test_round_trip_grows_by_twice_the_one_way_delay(echo):
     with DelayRelay(("127.0.0.1", 0), echo.address, delay=0.0) as relay, \
-            socket.create_connection(relay.address, timeout=10) as conn:
+            socket.create_connection(bound(relay), timeout=10) as conn:
         base = median_rtt(conn)
         assert base < 0.05
         relay.set_delay(0.1)
@@ -149,7 +155,7 @@ def test_data_intact_and_in_order_on_concurrent_connections(echo):
 def test_delay_changes_at_run_time(echo):
     """0 -> 150 ms -> 0 on one open connection; bytes are never reordered."""
     with DelayRelay(("127.0.0.1", 0), echo.address) as relay, \
-            socket.create_connection(relay.address, timeout=10) as conn:
+            socket.create_connection(bound(relay), timeout=10) as conn:
         assert median_rtt(conn) < 0.05
         relay.set_delay(0.15)
         assert relay.delay == 0.15
@@ -168,7 +174,7 @@ def test_delay_changes_at_run_time(echo):
 def test_close_leaves_no_thread_or_socket(echo):
     before_fds, before_threads = fds(), set(threading.enumerate())
     relay = DelayRelay(("127.0.0.1", 0), echo.address, delay=0.05).start()
-    conn = socket.create_connection(relay.address, timeout=10)
+    conn = socket.create_connection(bound(relay), timeout=10)
     round_trip(conn)
     conn.sendall(b"in flight")                  # held in the relay when it closes
     assert any(t.name.startswith("link-delay") for t in threading.enumerate())
@@ -181,14 +187,14 @@ def test_close_leaves_no_thread_or_socket(echo):
     assert wait_until(lambda: fds() <= before_fds), fds() - before_fds
     assert set(threading.enumerate()) - before_threads - echo_threads == set()
     with pytest.raises(OSError):                # nobody listens there any more
-        socket.create_connection(relay.address, timeout=2).close()
+        socket.create_connection(bound(relay), timeout=2).close()
 
 
 def test_unreachable_upstream_closes_the_client(echo):
     with socket.create_server(("127.0.0.1", 0)) as s:
         dead = s.getsockname()                  # a port nobody listens on once closed
     with DelayRelay(("127.0.0.1", 0), dead) as relay, \
-            socket.create_connection(relay.address, timeout=5) as conn:
+            socket.create_connection(bound(relay), timeout=5) as conn:
         try:
             assert conn.recv(16) == b""
         except ConnectionResetError:
@@ -227,6 +233,7 @@ def test_command_line_with_control_file(echo, tmp_path):
          f"{echo.address[0]}:{echo.address[1]}", "--delay-ms", "0", "--control", str(control)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
+        assert proc.stdout is not None and proc.stderr is not None
         line = proc.stdout.readline()
         assert "relaying 127.0.0.1:" in line, line + proc.stderr.read()
         port = int(line.split("relaying 127.0.0.1:")[1].split()[0])

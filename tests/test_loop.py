@@ -49,19 +49,23 @@ def test_aligned_loops_tick_together_on_the_wall_clock_grid():
     period, so they tick at the same instants; with another phase, that much later; without
     one, at their start's phase."""
     period = 0.02
-    walls = {}
+    walls: dict[str, list[float]] = {}
     for name, start, offset, phase in (("a", 1000.0, 1.7e9 + 0.0031, 0.0),
                                         ("b", 52.3377, 1.7e9 + 947.6654, 0.0),
                                         ("c", 52.3377, 1.7e9 + 947.6654, None),
                                         ("d", 52.3377, 1.7e9 + 947.6654, 0.01)):
         clock = SimClock(start, offset)
         loop = FixedRateLoop(period, clock, phase)
-        walls[name] = []
-        loop.run(lambda k, d, seen=walls[name], clock=clock: seen.append(clock.wall()),
-                 max_ticks=50)
+        seen: list[float] = []
+        walls[name] = seen
+
+        def note(k: int, d: float, seen: list[float] = seen, clock: SimClock = clock) -> None:
+            seen.append(clock.wall())
+
+        loop.run(note, max_ticks=50)
     for name in ("a", "b"):
-        phase = [round(w / period) * period - w for w in walls[name]]
-        assert max(map(abs, phase)) < 1e-6, name
+        off_grid = [round(w / period) * period - w for w in walls[name]]
+        assert max(map(abs, off_grid)) < 1e-6, name
     assert walls["a"][0] > 1.7e9 + 1000.0031 - 1e-9          # never before the start
     assert walls["a"][0] - (1.7e9 + 1000.0031) < period
     c_phase = walls["c"][0] % period

@@ -602,7 +602,7 @@ def test_random_bytes_and_malformed_frames_do_not_disturb(make_rig):
     junk += [b"\xfd" + bytes(rng.getrandbits(8) for _ in range(300)) for _ in range(50)]
     junk += [good[:n] for n in range(1, len(good))] + [bad_crc, b"\x00" * 60000,
                                                       b"\xfd\x09\xff" + b"\x00" * 30]
-    reads = []                                           # transport reads in each poll
+    reads: list[int] = []                                # transport reads in each poll
     recv = rig.link.transport.recv
 
     def counted_recv():

@@ -24,6 +24,7 @@ import threading
 import time
 from collections import defaultdict
 from pathlib import Path
+from typing import TypedDict
 
 import pytest
 
@@ -276,10 +277,16 @@ class SwarmWatch:
         self.session.close()
 
 
+class _Started(TypedDict, total=False):
+    swarm: Swarm
+    watch: SwarmWatch
+    mavproxy: MavProxy
+
+
 @pytest.fixture
 def rig(tmp_path):
     """start(key_file=None) -> (swarm, watch, mavproxy), all ended afterwards by PID."""
-    made = {}
+    made: _Started = {}
 
     def start(key_file: Path | None = None):
         port = free_port("udp")

@@ -108,8 +108,8 @@ def test_boundswarm_mocap_publishes_fixes_on_the_swarms_keys(tmp_path):
          str(_config(tmp_path, endpoint)), "--stats", str(stats), "--frames", "400"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
-        text, _ = proc.communicate(timeout=60)
-        text = text.decode(errors="replace")
+        raw, _ = proc.communicate(timeout=60)
+        text = raw.decode(errors="replace")
         assert proc.returncode == 0, text
         time.sleep(0.2)
         got = []

@@ -165,6 +165,7 @@ def test_dropped_and_delayed_frames():
         r.host.arm()
         r.run(0.5, command=(1.0, 1.0))
         fb = r.host.feedback()
+        assert fb is not None
         # the right wheel's estimates arrive 50 ms late: its position lags by 0.05 rev
         assert fb.pos_rev[1] - fb.pos_rev[0] == pytest.approx(0.05, abs=0.012)
         # half of the left node's 50 estimates and 5 heartbeats were dropped
@@ -192,6 +193,7 @@ def test_feedback_pairs_the_wheels_at_one_instant():
         host.poll()
         now[0] = 0.015
         fb = host.feedback()
+        assert fb is not None
         assert fb.pos_rev == pytest.approx((1.1, 2.0))
         assert fb.age == pytest.approx(0.015)
     finally:

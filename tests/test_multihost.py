@@ -132,7 +132,9 @@ class Hosts:
     def dropped(self, robot: int) -> int:
         """How many of the robot's segments its fault has dropped so far."""
         text = self.output(self.ground, "nft", "list", "table", "inet", f"fault{robot}")
-        return int(re.search(r"counter packets (\d+)", text)[1])
+        found = re.search(r"counter packets (\d+)", text)
+        assert found is not None, text
+        return int(found[1])
 
     def retransmitted(self, robot: int) -> int:
         """The TCP segments the robot's namespace has retransmitted so far (RetransSegs of
@@ -242,6 +244,7 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
         sc = dataclasses.replace(sc, robot=dataclasses.replace(sc.robot,
                                                                watchdog_timeout=watchdog))
         scenario = tmp_path / scenario.name
+        assert sc.source is not None            # loaded from a file
         scenario.write_text(re.sub(r"\[robot\]\n", f"[robot]\nwatchdog_timeout = {watchdog}\n",
                                    sc.source.read_text()))
         assert load_scenario(scenario).robot == sc.robot
@@ -325,7 +328,10 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
                                "--scenario", "scenario.toml", "--start-in", "2", "--wait", "60"],
                               ground, logs)
         assert mission.wait(timeout=90) == 0, (logs / "mission.log").read_text()
-        epoch = float(re.search(r"epoch\s+([0-9.]+)", (logs / "mission.log").read_text())[1])
+        mission_log = (logs / "mission.log").read_text()
+        found = re.search(r"epoch\s+([0-9.]+)", mission_log)
+        assert found is not None, mission_log
+        epoch = float(found[1])
         _sleep_until(epoch)
         cpu_at_epoch = cpu_times()
         if fault is not None:
@@ -354,11 +360,14 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
         hosts.stop(world)
         if relay is not None:
             hosts.stop(relay)
+            assert isinstance(fault, Delay)         # the relay is there for a delay
             text = (logs / "relay.log").read_text()
             # the robot's agent went through the relay, and the delay was set
             assert f"('10.77.0.{10 + fault.robot}'," in text, text
             assert f"one-way delay now {fault.ms:g} ms" in text, text
-            result["relay_connections"] = int(re.search(r"closed after (\d+)", text)[1])
+            found = re.search(r"closed after (\d+)", text)
+            assert found is not None, text
+            result["relay_connections"] = int(found[1])
         for name, proc in hosts.procs:
             assert name == "mission" or proc.returncode in (0, None, -2), \
                 f"{name}: {(logs / f'{name}.log').read_text()[-1500:]}"

@@ -81,7 +81,8 @@ def test_the_reach_test_is_on_the_extrapolated_position_whatever_the_shortcut():
             states[0] = state(m.stamp, m.x + (x - px) * (1 - reach / d),
                               m.y + (y - py) * (1 - reach / d), m.theta, m.v, m.u, 0)
         got = in_range(states, x, y, now, staleness, reach)
-        want_fresh, want_stale = [], []
+        want_fresh: list[tuple[float, float]] = []
+        want_stale: list[tuple[float, float]] = []
         for m in states:
             px, py, is_stale = extrapolate(m.x, m.y, m.theta, m.v, m.u, now - m.stamp,
                                            staleness)

@@ -127,7 +127,9 @@ def test_steady_flow_frames_are_the_bytes_cantools_makes_from_the_dbc():
         with pytest.raises(Exception) as refused:
             dbc.encode({"Input_Vel": bad, "Input_Torque_FF": 0.0}, strict=True)
         with pytest.raises(refused.type):
-            encode(1, Cmd.SET_INPUT_VEL, Input_Vel=bad, Input_Torque_FF=0.0)
+            # bad values (a str among them) on purpose: refused as cantools refuses them
+            encode(1, Cmd.SET_INPUT_VEL, Input_Vel=bad,  # type: ignore[arg-type]
+                   Input_Torque_FF=0.0)
     nan = encode(1, Cmd.SET_INPUT_VEL, Input_Vel=math.nan, Input_Torque_FF=0.0)
     assert bytes(nan.data) == dbc.encode({"Input_Vel": math.nan, "Input_Torque_FF": 0.0},
                                          strict=True)

@@ -1,5 +1,7 @@
 import time
+from typing import cast
 
+import can
 import numpy as np
 import pytest
 
@@ -71,6 +73,7 @@ def test_sitl_plant_moves_each_robot_along_its_wheels_arc():
         v, u = body_velocity(TWO_PI * right, TWO_PI * left, robot.wheel_radius,
                              robot.wheel_base)
         assert (rb.v, rb.u) == (v, u)
+        assert isinstance(rb.drivers, _Wheels)
         moving = dt * (steps - rb.drivers.silent)
         x, y, th = _arc(start, v, u, moving)
         assert rb.pose[:2] == pytest.approx((x, y), abs=1e-12)
@@ -111,7 +114,7 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
 
     robot = RobotParams(wheel_ramp=100.0)
     right, left = 3.0, 1.0                                  # rev/s, reached after 30 ms
-    drivers = DriverPair(_NoBus())
+    drivers = DriverPair(cast(can.BusABC, _NoBus()))      # a stand-in bus
     drivers.configure(ramp=robot.wheel_ramp, vel_limit=robot.wheel_speed_limit,
                       enable_watchdog=False)
     for node, target in ((drivers.right_node, right), (drivers.left_node, left)):
@@ -150,7 +153,7 @@ def test_odometry_of_the_emulated_encoders_follows_the_truth_over_uneven_steps()
     from transport.odrive_frames import AxisState
 
     robot = RobotParams(wheel_ramp=1000.0, wheel_speed_limit=10.0)
-    drivers = DriverPair(_NoBus())
+    drivers = DriverPair(cast(can.BusABC, _NoBus()))      # a stand-in bus
     drivers.configure(ramp=robot.wheel_ramp, vel_limit=robot.wheel_speed_limit,
                       enable_watchdog=False)
     for node in (drivers.right_node, drivers.left_node):
@@ -184,14 +187,15 @@ def test_sitl_plant_truth_is_independent_of_the_encoders_and_of_odometry():
 
     robot = RobotParams()
     start, (right, left) = (0.0, 0.0, 0.0), (2.0, 1.0)
-    rb = PlantRobot(1, start, _Wheels(right, left, encoder_gain=(1.03, 0.99)))
+    wheels = _Wheels(right, left, encoder_gain=(1.03, 0.99))
+    rb = PlantRobot(1, start, wheels)
     odometry = Odometry(robot.wheel_radius, robot.wheel_base, start)
-    odometry.update(*rb.drivers.pos)                        # the encoders' origin
+    odometry.update(*wheels.pos)                            # the encoders' origin
     plant = _plant([rb], robot)
     dt, steps = 0.005, 200
     for k in range(steps):
         plant.step(dt, dt * k, 100.0 + dt * k)
-        odometry.update(*rb.drivers.wheel_state()[:2])
+        odometry.update(*wheels.wheel_state()[:2])
     v, u = body_velocity(TWO_PI * right, TWO_PI * left, robot.wheel_radius, robot.wheel_base)
     truth = _arc(start, v, u, dt * steps)
     assert rb.pose[:2] == pytest.approx(truth[:2], abs=1e-12)
@@ -237,9 +241,9 @@ def test_sitl_plant_reads_only_the_buses_with_frames_waiting():
             reads[self.rid] += receive
             super().service(now, receive)
 
-    robots = [PlantRobot(rid, (0.0, 5.0 * rid, 0.0),
-                         Counted(open_bus("udp_multicast", "ff11::b5:7", port=port), rid))
-              for rid, port in ((1, ports[0]), (2, ports[1]))]
+    drivers = [Counted(open_bus("udp_multicast", "ff11::b5:7", port=port), rid)
+               for rid, port in ((1, ports[0]), (2, ports[1]))]
+    robots = [PlantRobot(d.rid, (0.0, 5.0 * d.rid, 0.0), d) for d in drivers]
     host = open_bus("udp_multicast", "ff11::b5:7", port=ports[0])
     try:
         plant = SitlPlant(robots, RobotParams(), Obstacles(np.zeros((0, 2)), np.zeros(0)), 2.0,
@@ -248,11 +252,11 @@ def test_sitl_plant_reads_only_the_buses_with_frames_waiting():
         assert reads == {1: 0, 2: 0}                   # nothing waiting: no bus read
         host.send(encode(0, Cmd.SET_INPUT_VEL, Input_Vel=2.5, Input_Torque_FF=0.0))
         deadline = time.monotonic() + 2.0
-        while robots[0].drivers.axes[0].setpoint != 2.5:
+        while drivers[0].axes[0].setpoint != 2.5:
             assert time.monotonic() < deadline, "the command never reached robot 1"
             plant.step(0.005, 0.0, 100.0)
         assert reads[1] >= 1 and reads[2] == 0
-        assert robots[1].drivers.axes[0].setpoint == 0.0
+        assert drivers[1].axes[0].setpoint == 0.0
     finally:
         host.shutdown()
         plant.close()
@@ -307,7 +311,7 @@ def test_remote_robot_rolls_through_every_report_late_or_not():
     prompt = remote(1, _RemoteReports(2.0, 1.0, every=1))
     late = remote(2, _RemoteReports(2.0, 1.0, every=12))
     merged = remote(3, _RemoteReports(2.0, 1.0, every=12, keep_last=True))
-    sent = []
+    sent: list[tuple[str, int, bytes]] = []
     plant = _plant([prompt, late, merged], RobotParams(), sent)
     for k in range(60):
         plant.step(0.005, 0.005 * k, 200.0 + 0.005 * k)

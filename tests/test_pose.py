@@ -90,7 +90,8 @@ class SlipWorld:
         r = self.robot
         right, left = (TWO_PI * self.motor.vel * self.grip) if self.motor.armed else (0.0, 0.0)
         v, u = body_velocity(right, left, r.wheel_radius, r.wheel_base)
-        self.pose = arc_step(*self.pose, v * dt, u * dt)
+        x, y, theta = self.pose
+        self.pose = arc_step(x, y, theta, v * dt, u * dt)
 
 
 class FixFeed:
@@ -106,7 +107,8 @@ class FixFeed:
         now = self.clock.wall()
         if now + 1e-9 >= self.next and not self.stopped:
             self.next = now + self.period
-            self.queue.append(FixMsg(1, 0, now, *self.world.pose, self.error))
+            x, y, theta = self.world.pose
+            self.queue.append(FixMsg(1, 0, now, x, y, theta, self.error))
         while self.queue and self.queue[0].stamp + self.latency <= now + 1e-9:
             self.latest = self.queue.pop(0)
 
@@ -146,7 +148,7 @@ def test_fixes_keep_a_slipping_robot_on_its_place_and_odometry_alone_drifts():
     clock, _, agent, world, feed = slipping_agent(PoseSettings())
     drive(clock, agent, world, feed, 0.1)                       # fixes arrive
     assert agent.arm() is None and agent.set_mode(AgentMode.FORMATION) is None
-    errors = []
+    errors: list[float] = []
     drive(clock, agent, world, feed, 10.0, errors)
     assert max(errors) < 0.05
     assert math.hypot(world.pose[0] - 8.0, world.pose[1] - 2.0) < 0.1
@@ -241,8 +243,9 @@ def test_the_pose_table_is_read_and_checked_naming_file_and_key(tmp_path):
         load_settings(bad)
     with pytest.raises(ConfigError, match="PoseSettings.drift: must be <= 1"):
         PoseSettings(drift=2.0)
+    clock = SimClock()
     with pytest.raises(ValueError, match="port of its fixes"):
-        Agent(load_settings(good), None, None, SimClock())
+        Agent(load_settings(good), MirrorMotor(clock), SharedSwarm(clock).port(1), clock)
 
 
 def test_a_ground_station_is_told_why_arming_is_refused():

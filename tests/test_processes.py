@@ -22,6 +22,7 @@ def stubborn(tmp_path):
         children.children.append(Child(f"stubborn_{k}", proc, tmp_path / f"{k}.log"))
     try:
         for child in children.children:
+            assert child.proc.stdout is not None
             assert child.proc.stdout.readline().strip() == "ready"
         yield children
     finally:
@@ -29,7 +30,8 @@ def stubborn(tmp_path):
             if child.proc.poll() is None:
                 child.proc.kill()
             child.proc.wait()
-            child.proc.stdout.close()
+            if child.proc.stdout is not None:
+                child.proc.stdout.close()
 
 
 def test_children_ended_together_wait_one_grace_period_not_one_each(stubborn):
@@ -44,7 +46,7 @@ def test_children_ended_together_wait_one_grace_period_not_one_each(stubborn):
 def test_an_interrupt_while_ending_the_children_kills_every_one_left(stubborn, monkeypatch):
     """A second Ctrl-C (or any error) while the launcher ends its children one by one: the
     ones not yet ended get SIGKILL at once, and the interrupt goes on."""
-    ended = []
+    ended: list[str] = []
 
     def interrupted(child, grace=3.0):
         if ended:

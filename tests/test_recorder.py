@@ -47,8 +47,9 @@ u16, u32 = st.integers(0, 0xFFFF), st.integers(0, 0xFFFFFFFF)
 @given(u16, u32, f64, st.lists(f32, min_size=7, max_size=7), st.integers(0, 255),
        st.integers(0, 7))
 def test_state_json_is_unchanged(rid, seq, stamp, values, mode, flags):
-    same_as_before("state", StateMsg,
-                   StateMsg(rid, seq, stamp, *values, mode, StateFlags(flags)).encode())
+    x, y, theta, v, u, x_d, y_d = values
+    same_as_before("state", StateMsg, StateMsg(rid, seq, stamp, x, y, theta, v, u, x_d, y_d,
+                                               mode, StateFlags(flags)).encode())
 
 
 @settings(max_examples=300, deadline=None)
@@ -142,7 +143,9 @@ def test_every_published_message_is_recorded_once(sessions, tmp_path):
         {kind: sorted(rows) for kind, rows in sent.items()}                  # once each, no more
     assert rec.recorded == total and rec.dropped == {"size": 1, "kind": 1}
     with open(tmp_path / "run.mcap", "rb") as f:                           # no empty channels
-        channels = make_reader(f).get_summary().channels.values()
+        summary = make_reader(f).get_summary()
+        assert summary is not None
+        channels = summary.channels.values()
     assert sorted(c.topic for c in channels) == sorted({t for rows in sent.values()
                                                         for t, _ in rows})
     times = [t for _, _, t, _ in read_messages(tmp_path / "run.mcap")]
@@ -190,7 +193,8 @@ def test_without_zenoh_timestamps_log_time_is_the_recorders_clock(tmp_path):
                                                      1234.5, 99.0)
 
 
-def test_a_failing_write_is_counted_and_the_channels_keep_emptying(sessions, tmp_path):
+def test_a_failing_write_is_counted_and_the_channels_keep_emptying(sessions, tmp_path,
+                                                                   monkeypatch):
     """A full disk must not stop the recorder from taking samples: Zenoh would block the
     router's routing on a full channel."""
     router, client = sessions
@@ -199,7 +203,7 @@ def test_a_failing_write_is_counted_and_the_channels_keep_emptying(sessions, tmp
 
     def disk_full(*args, **kwargs):
         raise OSError(28, "No space left on device")
-    rec._writer.add_message = disk_full
+    monkeypatch.setattr(rec._writer, "add_message", disk_full)
     try:
         time.sleep(0.3)
         sent = publish_swarm(client, keys, ticks=100)

@@ -11,7 +11,6 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -186,12 +185,14 @@ def test_the_worst_agent_and_the_stage_of_its_oldest_data():
                                    "in_agent": 5.0}),
              3: agent_stats(40.0, None)}
     worst = worst_age(stats)
+    assert worst is not None
     assert worst["robot"] == 2 and worst["p99_ms"] == 90.0
     assert worst["stage"] == "router_to_agent"
     assert "router -> the agent's ring" in describe_stage(worst) and "80 ms" in describe_stage(
         worst)
     # without router timestamps the stage is unknown, and said so
     none = worst_age({3: agent_stats(40.0, None)})
+    assert none is not None
     assert none["stage"] is None and "unknown" in describe_stage(none)
     assert worst_age({}) is None
 
@@ -357,8 +358,10 @@ def test_configs_that_cannot_share_a_process_are_refused_naming_why(tmp_path):
 
 
 def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
+    from agent.settings import AgentSettings
     from hil.sitl import agent_hosts
-    settings = [SimpleNamespace(robot_id=i, tick_phase=(i % 2) * 0.01) for i in range(1, 10)]
+    settings = [AgentSettings(robot_id=i, swarm="t", initial_pose=(0.0, 0.0, 0.0),
+                              tick_phase=(i % 2) * 0.01) for i in range(1, 10)]
     hosts = agent_hosts(settings, 3, killed={4})
     ids = [[s.robot_id for s in h] for h in hosts]
     assert ids == [[4], [1, 3, 5], [7, 9], [2, 6, 8]]
@@ -422,7 +425,7 @@ def test_one_ground_station_port_reaches_every_agent(launch):
     gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
     try:
         run = launch("sitl_small.toml", "--gcs-port", str(port))
-        seen = set()
+        seen: set[int] = set()
         end = time.monotonic() + 60
         while seen != {1, 2, 3} and time.monotonic() < end:
             msg = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=1)

@@ -168,8 +168,8 @@ def test_sitl_with_fixes_on_slipping_wheels_and_a_robot_whose_fixes_stop(tmp_pat
         return [p for p in list(m.get("plants", {}).values())
                 + [r.get("pid") for r in m.get("robots", {}).values()] if p]
     try:
-        text, _ = proc.communicate(timeout=240)
-        text = text.decode(errors="replace")
+        raw, _ = proc.communicate(timeout=240)
+        text = raw.decode(errors="replace")
         assert proc.returncode == 0, text
         m = json.loads((out / "metrics.json").read_text())
         assert m["collisions"] == 0, text

@@ -13,7 +13,9 @@ import subprocess
 import sys
 from pathlib import Path
 from types import MappingProxyType
+from typing import TypedDict, cast
 
+import can
 import numpy as np
 import pytest
 from helpers import SimClock, alive, judge_liveness
@@ -23,6 +25,7 @@ from agent.impairment import ImpairedSwarm, ImpairmentSettings
 from agent.settings import AgentSettings
 from common.payloads import ObstaclesMsg, Received, StateMsg
 from common.schema import ConfigError, fields, from_table, to_toml
+from common.vocabulary import StateFlags
 from firmware_sim.odrive_sim import DriverPair
 from firmware_sim.sitl_plant import PlantRobot, SitlPlant
 from firmware_sim.world import Obstacles, WorldParams
@@ -55,7 +58,7 @@ class _Bus:
 
 def _driving(right, left, **noise):
     """Emulated drivers in closed loop turning their wheels at (right, left) [rev/s]."""
-    drivers = DriverPair(_Bus(), **noise)
+    drivers = DriverPair(cast(can.BusABC, _Bus()), **noise)         # a stand-in bus
     drivers.configure(ramp=1000.0, enable_watchdog=False)
     for node, target in ((drivers.right_node, right), (drivers.left_node, left)):
         drivers.axes[node].request_state(AxisState.CLOSED_LOOP_CONTROL)
@@ -86,6 +89,7 @@ def test_slipping_wheels_move_the_robot_less_than_its_encoders_count():
 
     def each():
         travelled[0] += rb.v * dt
+        assert plant.slip is not None                  # the world has wheel slip
         slips.append(plant.slip[0].copy())
     _run(plant, steps, dt, each)
     # the batch's slips of robot index 1, period by period
@@ -97,7 +101,9 @@ def test_slipping_wheels_move_the_robot_less_than_its_encoders_count():
     mean_slip = np.mean(slips, axis=0)
     assert (mean_slip > 0.1).all()                     # this seed: both wheels slip forward
     turned = 2 * math.pi * robot.wheel_radius * 3.0 * dt * steps     # m, the wheels' turns
-    encoders = np.array(rb.drivers.wheel_state()[:2])
+    state = rb.drivers.wheel_state()
+    assert state is not None
+    encoders = np.array(state[:2])
     counted = 2 * math.pi * robot.wheel_radius * encoders.mean()       # m, by the encoders
     assert counted == pytest.approx(turned, abs=0.02)      # (less the ramp's first half step)
     assert travelled[0] == pytest.approx(turned * (1.0 - mean_slip.mean()), rel=1e-9)
@@ -160,7 +166,9 @@ def test_detections_go_missing_and_are_off_by_noise_as_configured():
     noise, dropout, publications = 0.1, 0.3, 800
     plant = _detecting(WorldParams(seed=3, detection_noise=noise, detection_dropout=dropout))
     truth = plant.obstacles
-    missing, errors, patterns = 0, [], {1: [], 2: []}
+    missing = 0
+    error_rows: list[list[float]] = []
+    patterns: dict[int, list[frozenset[int]]] = {1: [], 2: []}
     for k in range(publications):
         for msg in plant.detections(100.0 + 0.1 * k):
             assert isinstance(msg, ObstaclesMsg) and msg.stamp == 100.0 + 0.1 * k
@@ -168,12 +176,12 @@ def test_detections_go_missing_and_are_off_by_noise_as_configured():
             for c, r in zip(msg.centers, msg.radii):
                 kk = int(np.argmin(np.hypot(*(truth.centers[:3] - c).T)))   # in range: 3
                 seen.add(kk)
-                errors.append([*(c - truth.centers[kk]), r - truth.radii[kk]])
+                error_rows.append([*(c - truth.centers[kk]), r - truth.radii[kk]])
                 assert r >= 0.0
             missing += 3 - len(seen)
             patterns[msg.robot_id].append(frozenset(seen))
     assert missing / (2 * 3 * publications) == pytest.approx(dropout, abs=0.025)
-    errors = np.array(errors)
+    errors = np.array(error_rows)
     assert errors.std(axis=0) == pytest.approx([noise] * 3, rel=0.1)
     assert np.abs(errors.mean(axis=0)).max() < 4 * noise / math.sqrt(len(errors))
     assert patterns[1] != patterns[2]               # each robot's detections drop on their own
@@ -201,7 +209,7 @@ class _Link:
 
     def put(self, sender, stamp, received):
         self.states[sender] = Received(StateMsg(sender, 1, stamp, float(stamp), 0.0, 0.0, 0.0,
-                                                0.0, 0.0, 0.0, 0, 0), received)
+                                                0.0, 0.0, 0.0, 0, StateFlags(0)), received)
 
     def publish(self, state):
         self.published.append(state)
@@ -251,7 +259,8 @@ def test_jittered_states_keep_the_newest_by_stamp():
     back to an older state. The states shown are those not overtaken, the earlier arrivals:
     their age when first seen is below the mean delay, never below 0."""
     link, clock, swarm = _impaired(seed=2, link_delay=0.08, link_jitter=0.03)
-    shown, first_seen = [], {}
+    shown: list[float] = []
+    first_seen: dict[float, float] = {}
     for _ in range(3000):
         link.put(4, clock.wall(), clock.wall())
         got = swarm.neighbours().get(4)
@@ -314,7 +323,13 @@ def test_losses_are_per_link_and_reproducible():
 
 
 # --- configuration ---------------------------------------------------------------------
-BASE = dict(robot_id=3, swarm="s", initial_pose=(0.0, 0.0, 0.0))
+class _Base(TypedDict):
+    robot_id: int
+    swarm: str
+    initial_pose: tuple[float, float, float]
+
+
+BASE: _Base = {"robot_id": 3, "swarm": "s", "initial_pose": (0.0, 0.0, 0.0)}
 
 
 def test_impairment_is_absent_unless_written_and_round_trips():
@@ -478,8 +493,8 @@ def test_sitl_kills_the_planned_agent_and_reports_the_others(tmp_path):
         return [p for p in list(m.get("plants", {}).values())
                 + [r.get("pid") for r in m.get("robots", {}).values()] if p]
     try:
-        text, _ = proc.communicate(timeout=150)
-        text = text.decode(errors="replace")
+        raw, _ = proc.communicate(timeout=150)
+        text = raw.decode(errors="replace")
         assert proc.returncode == 0, text
         m = json.loads((out / "metrics.json").read_text())
         s = m["sitl"]

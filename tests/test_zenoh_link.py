@@ -64,7 +64,8 @@ def test_latest_value_cache_drops_malformed_and_own(sessions):
         c = cache.counters()
         assert c["dropped"] == {"size": 1, "out_of_order": 1} and c["accepted"] == 5
         with pytest.raises(TypeError):
-            snap[5] = None                                        # read-only
+            # a write to the read-only snapshot, on purpose: refused at run time
+            snap[5] = None  # type: ignore[index]
     finally:
         cache.close()
 
@@ -112,7 +113,9 @@ def test_swarm_link_between_two_agents_and_a_recording(sessions, tmp_path):
         a.put(keys.state(5), b"\x01\x01bad")
         assert wait_until(lambda: two.mission() is not None and two.obstacles() is not None
                           and 1 in two.neighbours(), 5.0, poll=0.01)
-        assert two.obstacles().radii.tolist() == [0.5] and one.mission().ids.tolist() == [1, 2]
+        obstacles, mission = two.obstacles(), one.mission()
+        assert obstacles is not None and mission is not None
+        assert obstacles.radii.tolist() == [0.5] and mission.ids.tolist() == [1, 2]
         assert 2 not in two.neighbours()                        # own state not a neighbour
         assert wait_until(lambda: rec.recorded >= 3, 5.0, poll=0.01)
     finally:
