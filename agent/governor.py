@@ -131,8 +131,7 @@ def _all_round(trail: FloatRows, age: float, speed: float, a: float, accel: floa
     distance to the report's segment and the unit vector toward the segment's far end,
     which :func:`_capsule` uses)."""
     around = -math.inf
-    paths = trail[0]
-    splits = len(paths)
+    splits = len(trail[0])
     dist, sx, sy = sight[0], sight[1], sight[2]
     speed = abs(speed)
     half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
@@ -146,14 +145,7 @@ def _all_round(trail: FloatRows, age: float, speed: float, a: float, accel: floa
         t = age * (k + 1) / splits
         t = 0.0 if 0.0 > t else t
         grow = _grow(t, speed, top_speed, half_accel, half_up, accel_lag, accel_lag2)
-        # each bound summed as its term is, so that it rounds no lower
-        path = paths[k]
-        if a + grow + path <= around:
-            continue
-        motion = ((path, trail[2][k], trail[3][k], trail[6][k], trail[4][k], trail[5][k],
-                   trail[7][k], trail[8][k]) if path > 0.0 else _NO_MOTION)
-        bound = a + grow + _own_share(motion, sx, sy, sx, sy, dist, grow)
-        around = bound if bound > around else around
+        around = _with_share(trail, k, a, grow, around, sx, sy, sx, sy, dist)
     return around
 
 
@@ -169,8 +161,7 @@ def _capsule(trail: FloatRows, age: float, speed: float, turn_rate: float, a: fl
     age itself."""
     reach = -math.inf
     rho_age = math.inf
-    paths = trail[0]
-    splits = len(paths)
+    splits = len(trail[0])
     sx, sy, off, ex, ey = sight[1], sight[2], sight[3], sight[4], sight[5]
     speed, half_turn = abs(speed), 0.5 * abs(turn_rate)
     half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
@@ -191,14 +182,24 @@ def _capsule(trail: FloatRows, age: float, speed: float, turn_rate: float, a: fl
             rho = turned if turned < rho else rho
         if k == splits - 1:
             rho_age = rho
-        path = paths[k]
-        if a + rho + path <= reach:
-            continue
-        motion = ((path, trail[2][k], trail[3][k], trail[6][k], trail[4][k], trail[5][k],
-                   trail[7][k], trail[8][k]) if path > 0.0 else _NO_MOTION)
-        bound = a + rho + _own_share(motion, sx, sy, ex, ey, off, rho)
-        reach = bound if bound > reach else reach
+        reach = _with_share(trail, k, a, rho, reach, sx, sy, ex, ey, off)
     return reach, rho_age
+
+
+def _with_share(trail: FloatRows, k: int, a: float, radius: float, best: float, sx: float,
+                sy: float, ex: float, ey: float, dist: float) -> float:
+    """The larger of ``best`` [m] and a + ``radius`` [m] + this robot's share of its own
+    motion over split ``k`` of ``trail`` toward a set of that radius seen at ``dist`` [m]
+    between the unit directions (``sx``, ``sy``) and (``ex``, ``ey``) (:func:`_own_share`);
+    the share, at most the split's path, is left out where even that cannot beat ``best``
+    (each bound summed as the term is, so that it rounds no lower)."""
+    path = trail[0][k]
+    if a + radius + path <= best:
+        return best
+    motion = ((path, trail[2][k], trail[3][k], trail[6][k], trail[4][k], trail[5][k],
+               trail[7][k], trail[8][k]) if path > 0.0 else _NO_MOTION)
+    bound = a + radius + _own_share(motion, sx, sy, ex, ey, dist, radius)
+    return bound if bound > best else best
 
 
 def _grow(t: float, speed: float, top_speed: float, half_accel: float, half_up: float,
