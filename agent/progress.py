@@ -1,8 +1,10 @@
 """The deadlock detector: no progress toward the reference for a configured time.
 
 A robot is *deadlocked* while it is outside its convergence tolerance (|p_d_dot| / K +
-TOLERANCE_MARGIN) and shed less than PROGRESS of its tracking error over the last
-``window`` seconds: stuck, or trailing its place at the reference's own speed. The law
+TOLERANCE_MARGIN), was outside it a ``window`` of seconds ago too, and shed less than
+PROGRESS of its tracking error since: stuck, or trailing its place at the reference's own
+speed. A robot pushed out of a place it held (braking for a neighbour whose data came
+late) is not deadlocked before it has been out of it for a window. The law
 has no feed-forward of the reference's velocity, so a converged robot trails it by
 |p_d_dot| / K (docs/controller.md, E9). The batch simulator's ``deadlocked`` metric
 (:mod:`firmware_sim.metrics`) applies the same rule at the end of a run. Once deadlocked, a
@@ -31,7 +33,8 @@ class ProgressWatch:
     def __init__(self, window: float = WINDOW):
         self.window = window                                  # s
         self.deadlocked = False
-        self._errors: deque[tuple[float, float]] = deque()   # (t [s], error [m]), 1 per s
+        # (t [s], error [m], outside the tolerance), one a second
+        self._errors: deque[tuple[float, float, bool]] = deque()
 
     def reset(self) -> None:
         """Forget the history (the robot stopped following its reference)."""
@@ -42,14 +45,14 @@ class ProgressWatch:
         """The verdict at time ``t`` [s] (monotonic) for tracking ``error`` [m] and the
         tolerance ``tol`` [m]."""
         if not self._errors or t >= self._errors[-1][0] + SAMPLE:
-            self._errors.append((t, error))
+            self._errors.append((t, error, error > tol))
         # keep one sample at or before t - window
         while len(self._errors) > 1 and self._errors[1][0] <= t - self.window:
             self._errors.popleft()
-        t0, then = self._errors[0]
+        t0, then, out = self._errors[0]
         full = t0 <= t - self.window
         if self.deadlocked:
             self.deadlocked = error > tol and not (full and error < then - 2.0 * PROGRESS)
         else:
-            self.deadlocked = full and error > tol and error > then - PROGRESS
+            self.deadlocked = full and out and error > tol and error > then - PROGRESS
         return self.deadlocked

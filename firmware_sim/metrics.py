@@ -49,7 +49,7 @@ class RunMetrics:
     _seen_t: list = field(default_factory=list)
     _final_err: np.ndarray | None = None
     _final_within: np.ndarray | None = None
-    _errors: list = field(default_factory=list)      # (t, tracking errors) once a second
+    _errors: list = field(default_factory=list)      # (t, tracking errors, within) once a second
     _governed: np.ndarray | None = None              # per robot: periods the governor acted
     _periods: np.ndarray | None = None               # per robot: periods it ran (alive)
     governor_min_allowed: float = math.inf           # m/s
@@ -113,7 +113,7 @@ class RunMetrics:
         self._seen_t.append(t)
         self._final_err, self._final_within = error, within
         if not self._errors or t >= self._errors[-1][0] + 1.0:
-            self._errors.append((t, error.copy()))
+            self._errors.append((t, error.copy(), within.copy()))
             while self._errors[0][0] < t - WINDOW - 1.0:
                 self._errors.pop(0)
 
@@ -142,16 +142,17 @@ class RunMetrics:
 
     @property
     def deadlocked(self) -> list[int]:
-        """The robots (ids) outside their tolerance at the end that shed less than
-        PROGRESS of tracking error over the last WINDOW seconds: stuck,
-        or trailing their place at its own speed."""
+        """The robots (ids) outside their tolerance at the end and WINDOW seconds before
+        it that shed less than PROGRESS of tracking error since: stuck, or trailing their
+        place at its own speed (agent.progress)."""
         if self._final_within is None or not self._errors:
             return []
         t_end = self._errors[-1][0]
-        then = [e for t, e in self._errors if t <= t_end - WINDOW]
+        then = [(e, w) for t, e, w in self._errors if t <= t_end - WINDOW]
         if not then:
             return []
-        stuck = ~self._final_within & (self._errors[-1][1] > then[-1] - PROGRESS)
+        error, within = then[-1]
+        stuck = ~self._final_within & ~within & (self._errors[-1][1] > error - PROGRESS)
         return [int(i) for i in self.ids[stuck]]
 
     @property

@@ -73,6 +73,20 @@ def test_deadlock_is_no_progress_over_the_window():
     assert not m.summary("x", 4.0)["deadlocked"]
 
 
+def test_a_robot_pushed_out_of_its_place_is_not_deadlocked_within_the_window():
+    """Robot 5 held its place (error 0.1, tolerance 1 m) and was pushed 1.5 m out 4 s
+    before the end (a brake for a neighbour's late data): out of tolerance, not converged,
+    but not deadlocked; held out for a whole window without progress, it is."""
+    m = RunMetrics(ids=np.array([5]), a=1.0)
+    for t in range(21):
+        _control(m, float(t), [0.1 if t < 16 else 1.5])
+    s = m.summary("x", 20.0)
+    assert not s["converged"] and s["stuck_robots"] == [5] and not s["deadlocked"]
+    for t in range(21, 27):
+        _control(m, float(t), [1.5])
+    assert m.summary("x", 26.0)["deadlocked_robots"] == [5]
+
+
 def test_mode_switches_are_counted():
     m = RunMetrics(ids=np.array([1, 2]), a=1.0)
     last_mode, err, within = np.zeros(2), np.zeros(2), np.zeros(2, bool)

@@ -31,6 +31,14 @@ def test_progress_just_short_of_the_threshold_is_a_deadlock():
     assert feed(ProgressWatch(10.0), (30.0, lambda t: 20.0 - slow * t))[-1]
 
 
+def test_a_robot_pushed_out_of_its_place_is_deadlocked_only_after_a_window_out():
+    """In tolerance (0.5 m of 0.75) for 12 s, then pushed 1.2 m out and held there: not
+    deadlocked until it has been out for a whole window without progress."""
+    watch = ProgressWatch(10.0)
+    verdicts = feed(watch, (30.0, lambda t: 0.5 if t < 12.0 else 1.2))
+    assert not any(verdicts[:int(21.9 / 0.02)]) and all(verdicts[int(23.1 / 0.02):])
+
+
 def test_reset_starts_the_window_again():
     watch = ProgressWatch(10.0)
     assert feed(watch, (12.0, lambda t: 5.0))[-1]
