@@ -113,10 +113,13 @@ def _travel(speed: float, age: float, accel: float, up: float, lag: float,
             top_speed: float) -> float:
     """How far [m] a neighbour last reported at ``speed`` [m/s] (>= 0) can have travelled
     ``age`` [s] (>= 0) later, all round (arguments as :func:`neighbour_hazard`, ``up`` its
-    speed-up at most ``accel``)."""
+    speed-up at most ``accel``): :func:`_grow`, and :func:`_all_round` over one split with
+    no motion of this robot's."""
     if math.isinf(accel):
         return top_speed * age
-    return _all_round(_STILL, age, speed, 0.0, accel, top_speed, up, lag)
+    accel_lag = accel * lag
+    return _grow(0.0 if 0.0 > age else age, abs(speed), top_speed, 0.5 * accel, 0.5 * up,
+                 accel_lag, accel_lag * lag)
 
 
 def _all_round(trail: FloatRows, age: float, speed: float, a: float, accel: float,
@@ -233,11 +236,8 @@ def neighbour_floor(rel_x: float, rel_y: float, speed: float, age: float, path: 
     bind (:func:`binding`) before computing them."""
     if age > staleness or math.isinf(accel):
         return -math.inf, math.inf
-    age, speed = (0.0 if 0.0 > age else age), abs(speed)
     up = accel if accel < speed_up else speed_up
-    accel_lag = accel * lag
-    top = (a + _grow(age, speed, top_speed, 0.5 * accel, 0.5 * up, accel_lag,
-                     accel_lag * lag) + path + FLOOR_PAD)
+    top = a + _travel(speed, age, accel, up, lag, top_speed) + path + FLOOR_PAD
     dist = math.sqrt(rel_x * rel_x + rel_y * rel_y)
     return 0.5 * (dist - top) - FLOOR_PAD, top
 
@@ -387,10 +387,8 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     # the all-round bound leaves more room than the capsule only where even its least
     # value, its last split's travel without this robot's share, does; else it is not
     # computed (its splits' shares are half the disc's cost)
-    t = age * len(trail[0]) / len(trail[0])
-    t, accel_lag = (0.0 if 0.0 > t else t), accel * lag
-    least = a + _grow(t, abs(speed), top_speed, 0.5 * accel, 0.5 * up, accel_lag,
-                      accel_lag * lag)
+    splits = len(trail[0])
+    least = a + _travel(speed, age * splits / splits, accel, up, lag, top_speed)
     if dist - least > beyond:
         within = dist - _all_round(trail, age, speed, a, accel, top_speed, up, lag, sight)
         beyond = within if within > beyond else beyond

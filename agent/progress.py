@@ -27,6 +27,14 @@ def tolerance(ref_speed: float, K: float) -> float:
     return ref_speed / K + TOLERANCE_MARGIN
 
 
+def stuck(error, then, out, out_then):
+    """The deadlock rule: out of tolerance now (``out``) and a window ago (``out_then``),
+    and a tracking error ``error`` [m] that shed less than PROGRESS of the ``then`` [m] of
+    a window ago. On bools and floats (an agent) or numpy arrays of them (a run's robots,
+    :mod:`firmware_sim.metrics`) alike."""
+    return out & out_then & (error > then - PROGRESS)
+
+
 class ProgressWatch:
     """One robot's deadlock verdict from its tracking error, updated every period."""
 
@@ -54,5 +62,5 @@ class ProgressWatch:
         if self.deadlocked:
             self.deadlocked = error > tol and not (full and error < then - 2.0 * PROGRESS)
         else:
-            self.deadlocked = full and out and error > tol and error > then - PROGRESS
+            self.deadlocked = full and bool(stuck(error, then, error > tol, out))
         return self.deadlocked

@@ -94,8 +94,8 @@ class Trail:
             return answer
         # each boundary's last position at or before it, and first at or after it
         last, newest, x, y = path[-1], len(path) - 1, xs[-1], ys[-1]
-        first = [(-i if i < 0 else i) - 1 if i else 0 for i in key[:-1]]
-        end = [-i - 1 if i < 0 else (i if i < newest else newest) for i in key[1:]]
+        first = [max(abs(i) - 1, 0) for i in key[:-1]]
+        end = [-i - 1 if i < 0 else min(i, newest) for i in key[1:]]
         answer = with_motion(([last - path[i] for i in first], [last - path[j] for j in end],
                               [x - xs[i] for i in first], [y - ys[i] for i in first],
                               [x - xs[j] for j in end], [y - ys[j] for j in end]))

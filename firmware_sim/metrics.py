@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.progress import PROGRESS, WINDOW
+from agent.progress import WINDOW, stuck
 
 
 @dataclass
@@ -152,8 +152,8 @@ class RunMetrics:
         if not then:
             return []
         error, within = then[-1]
-        stuck = ~self._final_within & ~within & (self._errors[-1][1] > error - PROGRESS)
-        return [int(i) for i in self.ids[stuck]]
+        held = stuck(self._errors[-1][1], error, ~self._final_within, ~within)
+        return [int(i) for i in self.ids[held]]
 
     @property
     def convergence_time(self) -> float | None:
