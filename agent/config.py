@@ -50,9 +50,13 @@ class ControlParams:
                                     "stays avoided until it is farther than b + hysteresis "
                                     "(false: per robot, every neighbour within b + "
                                     "hysteresis while the robot avoids any)")
+    exchange: float = _param(1.0, "m^2", "two robots swap their places in the formation "
+                             "when the sum of their squared distances to them falls by more "
+                             "than this (0: every robot keeps its place)", open_lo=False)
     law: str = setting("boundswarm", choices=("boundswarm", "paper"),
                        doc="boundswarm: with the deadlock resolution (sidestep, per-pair "
-                       "hysteresis, as set); paper: the paper's law with its fixes, both off")
+                       "hysteresis, place exchange, as set); paper: the paper's law with "
+                       "its fixes, all three off")
 
     def __post_init__(self) -> None:
         validate(self)

@@ -92,12 +92,13 @@ class LawParams(NamedTuple):
     governor: bool      # the safety governor acts
     sidestep: bool      # TRACK passes a neighbour in the way on its right
     pair_hysteresis: bool   # AVOID's hysteresis per pair (else per robot)
+    exchange: float     # m^2, the least gain of a place exchange (0: none; agent.exchange)
 
     @classmethod
     def of(cls, control: ControlParams, robot: RobotParams | None) -> "LawParams":
         """The law's view of the controller and of the robot (None: an ideal robot, whose
         wheels follow any command at once). ``law = "paper"`` turns the deadlock resolution
-        off (sidestep and per-pair hysteresis)."""
+        off (sidestep, per-pair hysteresis and place exchange)."""
         inf = math.inf
         limits = ((robot.a_max, robot.a_up, robot.a_turn_up, robot.drive_latency,
                    robot.wheel_radius, robot.wheel_base, robot.wheel_speed_limit,
@@ -107,7 +108,8 @@ class LawParams(NamedTuple):
         resolve = control.law != "paper"
         return cls(control.K, control.K_theta, control.D_max, control.K_ij, control.b,
                    control.c, control.u_max, control.hysteresis, *limits, control.governor,
-                   control.sidestep and resolve, control.pair_hysteresis and resolve)
+                   control.sidestep and resolve, control.pair_hysteresis and resolve,
+                   control.exchange if resolve else 0.0)
 
 
 def pair_active(d2: float, held: bool, b: float, hysteresis: float) -> bool:
@@ -146,11 +148,14 @@ class LawMemory(NamedTuple):
 
 def moved_estimate(mem: LawMemory, dx: float, dy: float) -> LawMemory:
     """The memory after the robot's pose estimate moved by (dx, dy) [m] while the robot did
-    not (a pose fix corrected it): the remembered error moves with it, so that the error's
-    finite difference, and the heading-rate feed-forward taken from it, see motion only.
-    Otherwise every fix's correction, divided by one period, becomes a heading rate: with
-    2 mm of fix noise, tenths of a rad/s."""
-    return mem._replace(prev_ex=mem.prev_ex + dx, prev_ey=mem.prev_ey + dy)
+    not (a pose fix corrected it), or its reference by -(dx, dy) (a place exchange): the
+    remembered error moves with it, so that the error's finite difference, and the
+    heading-rate feed-forward taken from it, see motion only. Otherwise every fix's
+    correction, divided by one period, becomes a heading rate: with 2 mm of fix noise,
+    tenths of a rad/s."""
+    return LawMemory(mem.prev_ex + dx, mem.prev_ey + dy, mem.has_prev, mem.avoiding, mem.side,
+                     mem.center_x, mem.center_y, mem.radius, mem.wheel_r, mem.wheel_l,
+                     mem.passing)     # field by field: compiled too (firmware_sim.compiled)
 
 
 def law_step(x: float, y: float, theta: float, ref_x: float, ref_y: float, ref_vx: float,

@@ -27,7 +27,8 @@ from typing import TYPE_CHECKING, Any, Mapping
 import numpy as np
 
 from agent.config import CONTROL_PARAMS, commitment, disc_args
-from agent.formation import Formation
+from agent.exchange import NOBODY, Exchange, exchange_step, place
+from agent.formation import reference_point
 from agent.governor import (
     NO_GAPS,
     SPLITS,
@@ -95,6 +96,7 @@ class AgentCounters:
     governor_min_allowed: float = math.inf   # m/s
     deadlocks: int = 0                   # times the robot became deadlocked
     deadlocked_periods: int = 0          # law steps while deadlocked
+    place_changes: int = 0               # places taken (agent.exchange; two an exchange)
 
     def summary(self) -> dict:
         ages = np.asarray(self.neighbour_age) * 1e3
@@ -105,6 +107,7 @@ class AgentCounters:
                 "governor_min_allowed": (self.governor_min_allowed
                                          if math.isfinite(self.governor_min_allowed) else None),
                 "deadlocks": self.deadlocks,
+                "place_changes": self.place_changes,
                 "deadlocked_share": (self.deadlocked_periods / self.law_steps
                                      if self.law_steps else 0.0),
                 "neighbour_age_ms": {
@@ -163,7 +166,9 @@ class Agent:
         self._seq = 0
         self._last_law: float | None = None     # monotonic time of the last law step
         self._mission_key: tuple | None = None
-        self._formation: Formation | None = None
+        self._places: tuple[np.ndarray, np.ndarray] | None = None  # the mission's offsets
+                                                                   # and motion (exchange)
+        self.exchange = Exchange(NOBODY)   # its place in the mission (agent.exchange)
         self._armed_at = -math.inf         # monotonic time of the last arm request
         self._arming = False               # waiting for both drivers to enter closed loop
         self._arm_sent = -math.inf
@@ -360,18 +365,49 @@ class Agent:
         if reason:
             self._enter_failsafe(reason)
 
-    def _formation_place(self, mission: MissionMsg) -> Formation | None:
+    def _mission_places(self, mission: MissionMsg) -> tuple[np.ndarray, np.ndarray] | None:
+        """The mission's places (offsets (S, 2) [m], motion: centre0, velocity, omega), None
+        when this robot is not in it; a new mission gives the robot its own place again."""
         key = (mission.seq, mission.stamp)
         if key != self._mission_key:
             self._mission_key = key
             where = np.flatnonzero(mission.ids == self.s.robot_id)
             if where.size == 0:
                 log.error("robot %d is not in the mission's formation", self.s.robot_id)
-                self._formation = None
+                self._places, self.exchange = None, Exchange(NOBODY)
             else:
-                self._formation = Formation(mission.offsets[where[:1]], mission.center0,
-                                            mission.velocity, mission.omega)
-        return self._formation
+                self._places = (np.ascontiguousarray(mission.offsets, dtype=float),
+                                np.array([*mission.center0, *mission.velocity,
+                                          mission.omega], dtype=float))
+                self.exchange = Exchange(int(where[0]))
+        return self._places
+
+    def _exchange_places(self, pose: tuple[float, float, float], near: InRange,
+                         neighbours: Mapping[int, Received[StateMsg]],
+                         places: tuple[np.ndarray, np.ndarray], t: float) -> None:
+        """One step of the place exchange (agent.exchange) with the fresh neighbours in
+        range, at mission time t [s]; a changed place moves the law's remembered error."""
+        gain_min = self._law_params.exchange
+        if gain_min <= 0.0:
+            return
+        msgs = [neighbours[rid].msg for rid in near.fresh_id]
+        known = [r.msg for rid, r in neighbours.items() if rid != self.s.robot_id]
+        was = self.exchange
+        self.exchange = exchange_step(
+            self.s.robot_id, pose[0], pose[1], t, was, np.array(near.fresh_id, dtype=int),
+            np.array(near.fresh_x), np.array(near.fresh_y),
+            np.array([m.slot for m in msgs], dtype=int),
+            np.array([m.partner for m in msgs], dtype=int),
+            np.array([m.other for m in msgs], dtype=int),
+            np.array([m.slot for m in known], dtype=float), *places, gain_min,
+            2.0 * self.s.timeouts.staleness)
+        if self.exchange.slot != was.slot:
+            self.counters.place_changes += 1
+            log.info("robot %d takes place %d (it had place %d)", self.s.robot_id,
+                     self.exchange.slot, was.slot)
+            ox, oy = place(*places, was.slot, t)
+            nx, ny = place(*places, self.exchange.slot, t)
+            self.memory = moved_estimate(self.memory, ox - nx, oy - ny)
 
     def _formation_step(self, pose: tuple[float, float, float], mission: MissionMsg | None,
                         neighbours: Mapping[int, Received[StateMsg]],
@@ -381,13 +417,18 @@ class Agent:
             self._last_law = None
             self._watch_progress(None)
             return 0.0, 0.0
-        formation = self._formation_place(mission)
-        if formation is None:
+        places = self._mission_places(mission)
+        if places is None:
             self._watch_progress(None)
             return 0.0, 0.0
-        rx, ry, rvx, rvy = formation.point(0, now_w - mission.epoch)
-        self.reference = (rx, ry)
+        t = now_w - mission.epoch
         near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
+        self._exchange_places(pose, near, neighbours, places, t)
+        offsets, motion = places
+        slot = self.exchange.slot
+        rx, ry, rvx, rvy = reference_point(offsets[slot, 0], offsets[slot, 1], motion[0],
+                                           motion[1], motion[2], motion[3], motion[4], t)
+        self.reference = (rx, ry)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         dt = max(dt, 1e-6)
         self._last_law = now_m
@@ -550,8 +591,10 @@ class Agent:
     def _publish(self, pose: tuple[float, float, float], now_w: float) -> None:
         self._seq += 1
         v, u = self.command
+        ex = self.exchange
         self.swarm.publish(StateMsg(self.s.robot_id, self._seq, now_w, *pose, v, u,
-                                    *self.reference, int(self.law_mode), self.flags()))
+                                    *self.reference, int(self.law_mode), self.flags(),
+                                    ex.slot, ex.partner, ex.other))
 
     def shutdown(self) -> None:
         """Zero velocity, then IDLE."""

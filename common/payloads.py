@@ -13,7 +13,11 @@ followed by the body of its kind:
 
 * STATE (key ``.../robot/<id>/state``, 36-byte body, 52 bytes in all):
   x, y, theta, v, u, x_d, y_d as f32 [m, m, rad, m/s, rad/s, m, m], mode u8
-  (common.vocabulary.Mode), flags u8 (common.vocabulary.StateFlags), 6 reserved zero bytes.
+  (common.vocabulary.Mode), flags u8 (common.vocabulary.StateFlags), then the place
+  exchange (agent.exchange.Exchange) as 3 x u16, each value + 1 (0: none, as the reserved
+  zero bytes of agents that have no place exchange): slot (the robot's place, an index into
+  the mission's members), partner (the robot id it asks or gives to), other (the place
+  that goes the other way).
 * OBSTACLES (``.../robot/<id>/obstacles``): count u16, then count x (cx, cy, r) f32 [m].
 * TRUTH (``.../robot/<id>/truth``, SITL only): x, y, theta, v, u as f64.
 * WHEELS (``.../robot/<id>/wheels``, multi-host SITL only): the emulated drivers' wheel
@@ -44,7 +48,7 @@ from common.vocabulary import StateFlags
 VERSION = 1
 
 HEADER = struct.Struct("<BBHId")
-STATE_BODY = struct.Struct("<7fBB6x")
+STATE_BODY = struct.Struct("<7fBB3H")
 TRUTH_BODY = struct.Struct("<5d")
 WHEELS_BODY = struct.Struct("<4d")
 FIX_BODY = struct.Struct("<3df")
@@ -149,20 +153,27 @@ class StateMsg:
     y_d: float
     mode: int
     flags: StateFlags
+    slot: int = -1         # its place exchange (agent.exchange.Exchange), -1: none
+    partner: int = -1
+    other: int = -1
 
     SIZE = HEADER.size + STATE_BODY.size
 
     def encode(self) -> bytes:
+        for name in ("slot", "partner", "other"):
+            if not -1 <= getattr(self, name) < 0xFFFF:
+                raise ValueError(f"StateMsg.{name}: {getattr(self, name)} is not in -1..65534")
         return (_pack_header(PayloadKind.STATE, self.robot_id, self.seq, self.stamp)
                 + STATE_BODY.pack(self.x, self.y, self.theta, self.v, self.u, self.x_d,
-                                  self.y_d, self.mode, int(self.flags)))
+                                  self.y_d, self.mode, int(self.flags), self.slot + 1,
+                                  self.partner + 1, self.other + 1))
 
     @classmethod
     def decode(cls, data: bytes) -> "StateMsg":
-        h, (x, y, th, v, u, xd, yd, mode, flags) = _fixed(data, PayloadKind.STATE, STATE_BODY,
-                                                          "state")
+        h, (x, y, th, v, u, xd, yd, mode, flags, slot, partner, other) = _fixed(
+            data, PayloadKind.STATE, STATE_BODY, "state")
         return cls(h.robot_id, h.seq, h.stamp, x, y, th, v, u, xd, yd, mode,
-                   _FLAGS[flags & _FLAG_MASK])
+                   _FLAGS[flags & _FLAG_MASK], slot - 1, partner - 1, other - 1)
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from typing import Callable
 import numpy as np
 
 from agent.config import ControlParams, RobotParams
+from agent.exchange import NOBODY
 from agent.formation import Formation
 from agent.law import LawParams
 from agent.progress import TOLERANCE_MARGIN
@@ -32,6 +33,7 @@ from firmware_sim.batch_pose import BatchPoseSource
 from firmware_sim.metrics import RunMetrics
 from firmware_sim.mocap_sim import MocapParams
 from firmware_sim.plant import PlantKind
+from firmware_sim.swarm_step import MEM_F, MEM_I, PLACE, PLACE_SINCE
 from firmware_sim.world import Obstacles, WorldParams
 
 log = logging.getLogger(__name__)
@@ -156,8 +158,11 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     law_seconds = 0.0
     reach = max(control.v_max, robot.v_wheel_max) * T   # m, farthest move per period
 
-    mem_f, mem_i = np.zeros((n, 7)), np.zeros((n, 4), np.int64)
-    new_f, new_i = np.zeros((n, 7)), np.zeros((n, 4), np.int64)
+    mem_f, mem_i = np.zeros((n, MEM_F)), np.zeros((n, MEM_I), np.int64)
+    # each robot's place exchange (agent.exchange.Exchange): its own place, no partner
+    mem_i[:, PLACE], mem_i[:, PLACE + 1:PLACE + 3] = np.arange(n), NOBODY
+    mem_f[:, PLACE_SINCE] = -np.inf
+    new_f, new_i = mem_f.copy(), mem_i.copy()
     cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
     held, new_held = np.full((n, cap + 1), -1, np.int64), np.full((n, cap + 1), -1, np.int64)
     cmd, ref, near = np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 2))
@@ -175,7 +180,8 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     for step in range(steps + 1):
         t = step * T
         t0 = clock() if clock else 0.0
-        own, seen, view, path, world_i = w.before_control(step, t, pose, cmd)
+        own, seen, view, path, world_i = w.before_control(step, t, pose, cmd,
+                                                          mem_i[:, PLACE:PLACE + 3])
         if w.pose_source is not None:       # agent.law.moved_estimate, for every robot
             mem_f[:, :2] += w.pose_source.jump
         if own is not pose:
@@ -201,11 +207,17 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
             law_seconds += clock() - t0
         mem_f, new_f, mem_i, new_i = new_f, mem_f, new_i, mem_i
         held, new_held = new_held, held
-        w.after_control(step, t, own, cmd)
+        if not w.alive.all():         # a dead agent's exchange state stays as it left it
+            dead = ~w.alive
+            mem_i[dead, PLACE:], mem_f[dead, PLACE_SINCE] = (new_i[dead, PLACE:],
+                                                             new_f[dead, PLACE_SINCE])
+        metrics.observe_places(mem_i[:, PLACE], new_i[:, PLACE], w.alive)
+        w.after_control(step, t, own, cmd, mem_i[:, PLACE:PLACE + 3])
         v, u, mode = cmd[:, 0], cmd[:, 1], cmd[:, 2]       # views, overwritten next period
         max_v, max_u, switches, all_within = k.period_summary(
             pose, cmd, ref, control.K, TOLERANCE_MARGIN, step == 0, w.alive, last_mode, err,
             within)
+        all_within = all_within and not metrics.shared_places
         metrics.observe_period(t, max_v, max_u, switches, err, within, all_within)
         metrics.observe_governor(cmd[:, 3], w.alive)
         if every and step % every == 0:
@@ -285,11 +297,12 @@ class _WorldState:
             k.odometry(0, world.seed, world.encoder_noise, np.zeros((n, 2)), self.last_read,
                        1.0, 1.0, pose.copy())
         depth = int(math.ceil((world.link_delay + 4.0 * world.link_jitter) / period)) + 3
-        self.hist = np.zeros((depth, n, 6))
+        self.hist = np.zeros((depth, n, 9))
         self.arrive = np.full((depth, n), np.inf)
         # the robots exchanged their states at rest before the mission started
-        self.view = np.zeros((n, 6))
+        self.view = np.zeros((n, 9))
         self.view[:, :3], self.view[:, 5] = pose, 0.0
+        self.view[:, 6], self.view[:, 7:] = np.arange(n), NOBODY    # their own places
         self.bad = np.zeros(n, np.int64)
         self.slip = np.zeros((n, 2))
         self.seen = np.zeros((n, 3))
@@ -299,13 +312,16 @@ class _WorldState:
                                    int(math.ceil(self.staleness / period)) + 2, n, 3))
         self.path_ring[:, :, :2] = pose[:, :2]
 
-    def before_control(self, step: int, t: float, pose: np.ndarray, cmd: np.ndarray
+    def before_control(self, step: int, t: float, pose: np.ndarray, cmd: np.ndarray,
+                       places: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(own pose, seen positions, received states, own paths, world_i) for
-        :func:`swarm_step.control` at t [s]; ``cmd`` holds the last period's commands."""
+        :func:`swarm_step.control` at t [s]; ``cmd`` holds the last period's commands,
+        ``places`` (N, 3) the robots' exchange states (slot, partner, other)."""
         np.less(t, self.kill_at, out=self.alive)
         if self.truth:              # everyone knows everyone's current state (no age)
             self.view[:, :3], self.view[:, 3:5], self.view[:, 5] = pose, cmd[:, :2], t
+            self.view[:, 6:] = places
             return pose, pose, self.view, self.path_ring, np.array([1, 0, step], np.int64)
         self.k.deliver(t, self.hist, self.arrive, self.view, self.staleness, self.seen)
         own = self.est if self.world.odometry else pose
@@ -319,9 +335,11 @@ class _WorldState:
         return own, self.seen, self.view, self.path_ring, np.array([0, self.world.seed, step],
                                                                     np.int64)
 
-    def after_control(self, step: int, t: float, own: np.ndarray, cmd: np.ndarray) -> None:
+    def after_control(self, step: int, t: float, own: np.ndarray, cmd: np.ndarray,
+                      places: np.ndarray) -> None:
         """Dead agents command nothing new (their drivers hold the last command until
-        their watchdog stops them); the live ones publish their state."""
+        their watchdog stops them); the live ones publish their state (``places``: their
+        exchange states, slot, partner and other)."""
         if self.pose_source is not None:          # failsafe HOLD: no fix for too long
             cmd[self.pose_source.held, :2] = 0.0
         if self.world.kill:
@@ -331,9 +349,9 @@ class _WorldState:
             cmd[dead, :2] = np.where(tripped[dead, None], 0.0, self.held[dead])
         if not self.truth:
             w = self.world
-            self.k.publish(step, self.period, own, cmd, self.alive, w.seed, w.link_delay,
-                           w.link_jitter, w.link_loss, w.loss_burst, self.bad, self.hist,
-                           self.arrive)
+            self.k.publish(step, self.period, own, cmd, places, self.alive, w.seed,
+                           w.link_delay, w.link_jitter, w.link_loss, w.loss_burst, self.bad,
+                           self.hist, self.arrive)
 
     def before_plant(self, step: int) -> None:
         """The wheels' slip for the coming period."""

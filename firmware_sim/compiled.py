@@ -36,8 +36,8 @@ from typing import Any
 log = logging.getLogger(__name__)
 
 SOURCES = ("common.draws", "agent.kinematics", "agent.avoidance", "agent.law", "agent.formation",
-           "agent.governor", "agent.neighbours", "agent.odometry", "firmware_sim.world_step",
-           "firmware_sim.swarm_step")
+           "agent.exchange", "agent.governor", "agent.neighbours", "agent.odometry",
+           "firmware_sim.world_step", "firmware_sim.swarm_step")
 # modules whose functions are compiled into their callers (module docstring)
 INLINED = ("agent.governor",)
 

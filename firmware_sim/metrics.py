@@ -53,6 +53,10 @@ class RunMetrics:
     _governed: np.ndarray | None = None              # per robot: periods the governor acted
     _periods: np.ndarray | None = None               # per robot: periods it ran (alive)
     governor_min_allowed: float = math.inf           # m/s
+    place_changes: int = 0                           # a robot took another place
+                                                     # (agent.exchange; two an exchange)
+    shared_places: list = field(default_factory=list)    # robot ids: a live robot's place
+                                                         # that another live one holds too
 
     def observe_geometry(self, t: float, pos: np.ndarray, pairs: np.ndarray,
                          robots: np.ndarray, clearance: np.ndarray,
@@ -116,6 +120,20 @@ class RunMetrics:
             self._errors.append((t, error.copy(), within.copy()))
             while self._errors[0][0] < t - WINDOW - 1.0:
                 self._errors.pop(0)
+
+    def observe_places(self, slots: np.ndarray, before: np.ndarray, alive: np.ndarray
+                       ) -> None:
+        """A period's places (:mod:`agent.exchange`): each robot's slot now and the period
+        before. A formation whose live robots share a place is not within tolerance (the
+        callers' ``all_within`` of :meth:`observe_period`)."""
+        self.place_changes += int(np.count_nonzero(slots != before))
+        live = slots[alive]
+        if len(np.unique(live)) == len(live):
+            self.shared_places = []
+        else:
+            _, first, count = np.unique(live, return_index=True, return_counts=True)
+            shared = np.isin(live, live[first[count > 1]])
+            self.shared_places = [int(r) for r in self.ids[alive][shared]]
 
     def observe_governor(self, limit: np.ndarray, alive: np.ndarray) -> None:
         """A period's governor limits [m/s] per robot (inf where it left the command alone)
@@ -197,6 +215,8 @@ class RunMetrics:
             "mode_switches": self.mode_switches,
             "max_pose_error": self.max_pose_error,
             "pose_failsafe_robots": list(self.pose_holds),
+            "place_changes": self.place_changes,
+            "shared_places": list(self.shared_places),
             **self._governor_summary(),
         }
 

@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from agent.exchange import Exchange, exchange_step, place
 from agent.formation import reference_point
 from agent.governor import (
     NO_GAPS,
@@ -37,11 +38,18 @@ from agent.law import (
     last_velocity,
     law_step,
     may_pass,
+    moved_estimate,
     pair_active,
 )
 from firmware_sim.world_step import FRESH, NONE, STALE, detect
 
 prange = range   # numba.prange when compiled
+
+# the law's memory per robot (control): floats prev_ex, prev_ey, center_x, center_y, radius,
+# wheel_r, wheel_l, then the place exchange's since; ints has_prev, avoiding, side, passing,
+# then the place exchange's slot, partner, other and giving (agent.exchange.Exchange)
+MEM_F, MEM_I = 8, 8
+PLACE, PLACE_SINCE = 4, 7
 
 
 Grid = tuple[np.ndarray, np.ndarray, float, float, float, int, int]
@@ -229,6 +237,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
     nbr_j = np.empty(cap, np.int64)
     nbr_h = np.empty(cap)
     nbr_g = np.empty(cap)             # m, each neighbour's governor disc beyond a
+    nbr_s, nbr_p, nbr_o = (np.empty(cap, np.int64), np.empty(cap, np.int64),
+                           np.empty(cap, np.int64))   # their slot, partner, other
     o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
     o_k = np.empty(cap, np.int64)
     c_floor, c_q = np.empty(cap), np.empty(cap, np.int64)   # the neighbours with a disc
@@ -330,7 +340,22 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             need = max(need, k)
             if k > cap:
                 continue
-        rx, ry, rvx, rvy = reference_point(offsets[i, 0], offsets[i, 1], motion[0],
+        ex = Exchange(mem_i[i, PLACE], mem_i[i, PLACE + 1], mem_i[i, PLACE + 2],
+                      mem_i[i, PLACE + 3] != 0, mem_f[i, PLACE_SINCE])
+        if p.exchange > 0.0:
+            for q in range(m):
+                j = nbr_j[q]
+                nbr_s[q], nbr_p[q], nbr_o[q] = int(view[j, 6]), int(view[j, 7]), int(view[j, 8])
+            was = ex.slot
+            ex = exchange_step(i, x, y, t, ex, nbr_j[:m], nbr_x[:m], nbr_y[:m], nbr_s[:m],
+                               nbr_p[:m], nbr_o[:m], view[:, 6], offsets, motion,
+                               p.exchange, 2.0 * staleness)
+            if ex.slot != was:      # the error's finite difference sees no jump
+                ox, oy = place(offsets, motion, was, t)
+                nx, ny = place(offsets, motion, ex.slot, t)
+                mem = moved_estimate(mem, ox - nx, oy - ny)
+        slot = ex.slot
+        rx, ry, rvx, rvy = reference_point(offsets[slot, 0], offsets[slot, 1], motion[0],
                                            motion[1], motion[2], motion[3], motion[4], t)
         # the pairs active last period (per-pair hysteresis); held lists are short
         for q in range(m):
@@ -353,6 +378,9 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
         out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
                                                              int(new.avoiding), new.side)
         out_mem_i[i, 3] = new.passing
+        out_mem_i[i, PLACE], out_mem_i[i, PLACE + 1] = ex.slot, ex.partner
+        out_mem_i[i, PLACE + 2], out_mem_i[i, PLACE + 3] = ex.other, int(ex.giving)
+        out_mem_f[i, PLACE_SINCE] = ex.since
         w = 0
         for q in range(m):
             dx, dy = nbr_x[q] - x, nbr_y[q] - y
@@ -397,19 +425,20 @@ def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarra
     pose (N, 3) [m, m, rad] the truth; own (N, 3) the pose each robot believes it has
     (N, 4 with a pose source: and its position uncertainty [m], which grows every hazard);
     seen (N, 3) where the robots believe the others are: x, y [m] and NONE, FRESH or STALE
-    (:mod:`firmware_sim.world_step`); view (N, 6) the states they last received from each
-    other (x, y, theta, v, u, stamp [s]), for the governor's hazards; path (K, N, 3) [m]
-    each robot's believed position x, y and the cumulative path through them, a ring over
-    its last K periods (period number p in row p % K; rows not written yet the start;
-    older data counts K - 1 periods); world_i = (1 when own and seen are the truth and
-    detections exact, seed, period number), world_f = (detection noise [m], detection
-    dropout, staleness [s], stop time of a dead agent [s], top speed [m/s])
-    (:func:`agent.governor.neighbour_hazard`; a stale neighbour is an obstacle of
-    :func:`agent.governor.silent_radius`). Memory of :class:`LawMemory` as floats
-    (N, 7): prev_ex, prev_ey, center_x, center_y, radius, wheel_r, wheel_l, and ints
-    (N, 4): has_prev, avoiding, side, passing; held (N, cap + 1) the indices of the robots
-    each robot's pairs with which were active (:func:`agent.law.pair_active`), -1 ending
-    the list; offsets (N, 2) [m] and motion (5,) = centre0 x, y [m], velocity x, y [m/s],
+    (:mod:`firmware_sim.world_step`); view (N, 9) the states they last received from each
+    other (x, y, theta, v, u, stamp [s], slot, partner, other), for the governor's
+    hazards and the place exchange; path (K, N, 3) [m] each robot's believed position x,
+    y and the cumulative path through them, a ring over its last K periods (period number
+    p in row p % K; rows not written yet the start; older data counts K - 1 periods);
+    world_i = (1 when own and seen are the truth and detections exact, seed, period
+    number), world_f = (detection noise [m], detection dropout, staleness [s], stop time
+    of a dead agent [s], top speed [m/s]) (:func:`agent.governor.neighbour_hazard`; a
+    stale neighbour is an obstacle of :func:`agent.governor.silent_radius`). Memory of
+    :class:`LawMemory` and of :class:`agent.exchange.Exchange` as floats (N, MEM_F) and
+    ints (N, MEM_I) (MEM_F); held (N, cap + 1) the indices of the robots each robot's
+    pairs with which were active (:func:`agent.law.pair_active`), -1 ending
+    the list; offsets (N, 2) [m] the formation's places and motion (5,) = centre0 x, y
+    [m], velocity x, y [m/s],
     omega [rad/s] of the formation; obs (K, 3) = obstacle centre x, y and radius [m].
     Out: out_cmd (N, 4) = v [m/s], u [rad/s], mode, the speed the governor allowed when it
     acted [m/s] (inf: it did not); out_ref (N, 4) = p_d, p_d_dot; the new memory and held

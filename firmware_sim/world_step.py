@@ -31,12 +31,14 @@ SLIP_MAX = 0.9       # slip fractions are clipped to +-SLIP_MAX
 TIME_EPS = 1e-9      # s, arrival times equal to a period's start up to rounding count as due
 
 
-def publish(step: int, period: float, est: np.ndarray, cmd: np.ndarray, alive: np.ndarray,
-            seed: int, delay: float, jitter: float, loss: float, burst: float,
-            bad: np.ndarray, hist: np.ndarray, arrive: np.ndarray) -> None:
+def publish(step: int, period: float, est: np.ndarray, cmd: np.ndarray, places: np.ndarray,
+            alive: np.ndarray, seed: int, delay: float, jitter: float, loss: float,
+            burst: float, bad: np.ndarray, hist: np.ndarray, arrive: np.ndarray) -> None:
     """Every live robot publishes its state of this period: ``est`` (N, 3) pose [m, m,
-    rad] and ``cmd`` (N, >= 2) v [m/s], u [rad/s], into ring slot step % H of ``hist`` (H,
-    N, 6: x, y, theta, v, u, stamp [s]) with its arrival time [s] in ``arrive`` (H, N)
+    rad], ``cmd`` (N, >= 2) v [m/s], u [rad/s] and ``places`` (N, 3) its place exchange's
+    slot, partner and other (:class:`agent.exchange.Exchange`), into ring slot step % H of
+    ``hist`` (H, N, 9: x, y, theta, v, u, stamp [s], slot, partner, other) with its arrival
+    time [s] in ``arrive`` (H, N)
     (inf: lost or not sent). Loss: independent with probability ``loss`` when ``burst`` is
     1, else a Gilbert-Elliott channel (``bad`` (N,) its state) with mean burst ``burst``.
     Age: delay + jitter * normal, at least 0 and at most H - 2 periods."""
@@ -46,6 +48,8 @@ def publish(step: int, period: float, est: np.ndarray, cmd: np.ndarray, alive: n
         hist[slot, j, 0], hist[slot, j, 1], hist[slot, j, 2] = est[j, 0], est[j, 1], est[j, 2]
         hist[slot, j, 3], hist[slot, j, 4] = cmd[j, 0], cmd[j, 1]
         hist[slot, j, 5] = step * period
+        hist[slot, j, 6], hist[slot, j, 7] = places[j, 0], places[j, 1]
+        hist[slot, j, 8] = places[j, 2]
         lost = not alive[j]
         if alive[j] and loss > 0.0:
             bad[j] = loss_step(uniform(seed, LOSS, j, 0, step), bad[j], loss, burst)
@@ -58,14 +62,14 @@ def publish(step: int, period: float, est: np.ndarray, cmd: np.ndarray, alive: n
 
 def deliver(t: float, hist: np.ndarray, arrive: np.ndarray, view: np.ndarray,
             staleness: float, out_seen: np.ndarray) -> None:
-    """What the robots know of each other at time t [s]: ``view`` (N, 6) holds, per robot,
+    """What the robots know of each other at time t [s]: ``view`` (N, 9) holds, per robot,
     the newest of its states that has arrived (stamp -inf: none yet), updated from the ring
     of :func:`publish`; ``out_seen`` (N, 3) = the position [m] extrapolated to t and NONE,
     FRESH or STALE."""
     for j in prange(view.shape[0]):
         for h in range(hist.shape[0]):
             if arrive[h, j] <= t + TIME_EPS and hist[h, j, 5] > view[j, 5]:
-                for c in range(6):
+                for c in range(hist.shape[2]):
                     view[j, c] = hist[h, j, c]
         if view[j, 5] == -math.inf:
             out_seen[j, 0], out_seen[j, 1], out_seen[j, 2] = view[j, 0], view[j, 1], NONE

@@ -97,7 +97,7 @@ def analyse_recording(path: Path, sc: Scenario, killed: Mapping[int, float] | No
         elif kind == "state":
             states[msg["robot_id"]].append((msg["stamp"], [msg["v"], msg["u"], msg["mode"],
                                                            msg["x_d"], msg["y_d"], msg["x"],
-                                                           msg["y"]]))
+                                                           msg["y"], msg.get("slot", -1)]))
     if epoch is None:
         raise RecordingError(f"{path}: no mission message; was the mission started?")
     missing = [int(i) for i in sc.ids if not truth.get(int(i)) or not states.get(int(i))]
@@ -110,6 +110,7 @@ def analyse_recording(path: Path, sc: Scenario, killed: Mapping[int, float] | No
     pose = np.zeros((len(t), n, 3))
     v, u = np.zeros((len(t), n)), np.zeros((len(t), n))
     mode = np.zeros((len(t), n), dtype=int)
+    slots = np.zeros((len(t), n), dtype=int)   # each robot's place (agent.exchange)
     truth_t = []
     truth_series = {}
     pose_errors: dict[int, dict[str, float]] = {}
@@ -121,10 +122,12 @@ def analyse_recording(path: Path, sc: Scenario, killed: Mapping[int, float] | No
         pose[:, j] = _pose_at(tt - epoch, tv, t)
         s = _at(st - epoch, sv, t)
         v[:, j], u[:, j], mode[:, j] = s[:, 0], s[:, 1], s[:, 2].astype(int)
+        slots[:, j] = np.where(s[:, 7] >= 0, s[:, 7], j)    # none published: its own
         pose_errors[int(rid)] = pose_error_summary(
             _pose_error(tt - epoch, tv, st - epoch, sv, sc.duration))
-    ref = np.stack([sc.formation.reference(tk)[0] for tk in t])
-    ref_vel = np.stack([sc.formation.reference(tk)[1] for tk in t])
+    refs = [sc.formation.reference(tk) for tk in t]
+    ref = np.stack([r[0][slots[k]] for k, r in enumerate(refs)])
+    ref_vel = np.stack([r[1][slots[k]] for k, r in enumerate(refs)])
 
     metrics = RunMetrics(ids=sc.ids, a=sc.control.a)
     metrics.killed = sorted(int(rid) for rid in killed)
@@ -148,6 +151,8 @@ def analyse_recording(path: Path, sc: Scenario, killed: Mapping[int, float] | No
         max_v, max_u, switches, all_within = period_summary(
             pose[k], cmd, np.column_stack([ref[k], ref_vel[k]]), sc.control.K,
             TOLERANCE_MARGIN, k == 0, alive, last_mode, err, within)
+        metrics.observe_places(slots[k], slots[max(k - 1, 0)], alive)
+        all_within = all_within and not metrics.shared_places
         metrics.observe_period(float(tk), max_v, max_u, switches, err, within, all_within)
     data = RunData(ids=sc.ids, t=t, pose=pose, v=v, u=u, mode=mode, ref=ref,
                    dist_t=np.asarray(metrics.geometry_t),

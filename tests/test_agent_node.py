@@ -54,7 +54,8 @@ def test_a_single_agent_reaches_its_place():
 
 def test_agents_swap_through_each_other_without_collision():
     clock, net, agents = make_swarm([(-6.0, 0.0, 0.0), (6.0, 0.3, np.pi)],
-                                    [(6.0, 0.0), (-6.0, 0.0)])
+                                    [(6.0, 0.0), (-6.0, 0.0)],
+                                    control=ControlParams(exchange=0.0))   # places fixed
     dmin = np.inf
     for a in agents:
         a.arm()
@@ -69,6 +70,24 @@ def test_agents_swap_through_each_other_without_collision():
     assert agents[0].odometry.pose[0] > 5.0 and agents[1].odometry.pose[0] < -5.0
     modes = {m.mode for m in agents[0].swarm.published}
     assert Mode.AVOID in modes
+
+
+def test_agents_exchange_places_over_their_state_messages():
+    """Each agent stands at the other's place: they exchange places through the handshake
+    in their state messages (agent.exchange) and stay where they are."""
+    clock, net, agents = make_swarm([(-4.0, 0.0, 0.0), (4.0, 0.0, np.pi)],
+                                    [(4.0, 0.0), (-4.0, 0.0)])
+    for a in agents:
+        a.arm()
+        a.set_mode(AgentMode.FORMATION)
+    run(clock, agents, 3.0)
+    assert [a.exchange.slot for a in agents] == [1, 0]
+    assert [a.counters.place_changes for a in agents] == [1, 1]
+    last = [a.swarm.published[-1] for a in agents]
+    assert [(m.slot, m.partner, m.other) for m in last] == [(1, -1, -1), (0, -1, -1)]
+    assert last[0].x_d == pytest.approx(-4.0) and last[1].x_d == pytest.approx(4.0)
+    for a, x in zip(agents, (-4.0, 4.0)):
+        assert abs(a.odometry.pose[0] - x) < 0.5
 
 
 def test_agents_keep_the_pair_hysteresis_by_neighbour_id():

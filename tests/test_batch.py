@@ -69,11 +69,24 @@ def test_bundled_scenarios_converge_safely(name):
 def test_head_on_swap_resolves(lateral):
     poses = np.array([[-10, 0, 0.0], [10, lateral, math.pi]])
     form = Formation(np.array([[10.0, 0], [-10.0, 0]]), (0.0, 0.0))
-    res = simulate(np.array([1, 2]), poses, form, Obstacles.empty(), ControlParams(),
-                   RobotParams(), SimOptions(duration=20.0))
+    res = simulate(np.array([1, 2]), poses, form, Obstacles.empty(),
+                   ControlParams(exchange=0.0), RobotParams(), SimOptions(duration=20.0))
     m = res.metrics.summary("swap", 20.0)
     assert m["converged"] and m["min_pair_distance"] > 1.0
     assert res.pose[-1, 0, 0] > 9 and res.pose[-1, 1, 0] < -9   # they did swap
+
+
+def test_robots_facing_each_others_places_exchange_them():
+    """With place exchange (the default), the two robots of the head-on swap take each
+    other's place where they stand instead of driving through each other."""
+    poses = np.array([[-4, 0, 0.0], [4, 0.0, math.pi]])     # within sensing range
+    form = Formation(np.array([[4.0, 0], [-4.0, 0]]), (0.0, 0.0))
+    res = simulate(np.array([1, 2]), poses, form, Obstacles.empty(), ControlParams(),
+                   RobotParams(), SimOptions(duration=5.0))
+    m = res.metrics.summary("swap", 5.0)
+    assert m["place_changes"] == 2 and m["shared_places"] == []
+    assert m["converged"] and m["convergence_time"] < 1.0
+    assert np.abs(res.pose[-1, :, 0] - poses[:, 0]).max() < 0.5   # they stayed
 
 
 def test_pair_hysteresis_is_kept_across_periods():

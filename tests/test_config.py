@@ -102,7 +102,7 @@ def test_every_field_is_documented_with_a_unit():
 def test_control_params_as_runtime_parameters():
     names = [p.name for p in CONTROL_PARAMS]
     assert names == ["BS_K", "BS_K_THETA", "BS_D_MAX", "BS_K_IJ", "BS_A", "BS_B", "BS_C",
-                     "BS_PERIOD", "BS_U_MAX", "BS_HYST"]
+                     "BS_PERIOD", "BS_U_MAX", "BS_HYST", "BS_EXCHANGE"]
     # every numeric field, in order; the switches and the law's name are no runtime
     # parameters
     switches = ("governor", "sidestep", "pair_hysteresis", "law")

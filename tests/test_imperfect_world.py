@@ -172,12 +172,13 @@ def test_a_world_is_reproducible_from_its_seed():
 
 def losses(loss, burst, steps=40_000, seed=2):
     """The loss pattern of one robot's states over ``steps`` periods."""
-    hist, arrive = np.zeros((3, 1, 6)), np.zeros((3, 1))
+    hist, arrive = np.zeros((3, 1, 9)), np.zeros((3, 1))
     bad, lost = np.zeros(1, np.int64), np.zeros(steps, bool)
     est, cmd, alive = np.zeros((1, 3)), np.zeros((1, 3)), np.ones(1, bool)
+    places = np.zeros((1, 3), np.int64)
     for step in range(steps):
-        world_step.publish(step, 0.02, est, cmd, alive, seed, 0.0, 0.0, loss, burst, bad, hist,
-                           arrive)
+        world_step.publish(step, 0.02, est, cmd, places, alive, seed, 0.0, 0.0, loss, burst,
+                           bad, hist, arrive)
         lost[step] = math.isinf(arrive[step % 3, 0])
     edges = np.flatnonzero(np.diff(np.r_[0, lost.astype(int), 0]))
     runs = edges[1::2] - edges[::2]
@@ -200,10 +201,12 @@ def test_independent_losses_are_not_bursty():
 def test_delivered_states_arrive_late_and_turn_stale():
     """A robot moving at 1 m/s along x, its states 0.1 s late: the others see the newest
     state that arrived, extrapolated to now; once it stops publishing, its last position,
-    stale after the staleness limit."""
+    stale after the staleness limit; its place exchange's state (slot, partner, other)
+    arrives with it."""
     T, delay = 0.02, 0.1
-    hist, arrive = np.zeros((8, 1, 6)), np.full((8, 1), np.inf)
-    view, seen = np.zeros((1, 6)), np.zeros((1, 3))
+    hist, arrive = np.zeros((8, 1, 9)), np.full((8, 1), np.inf)
+    view, seen = np.zeros((1, 9)), np.zeros((1, 3))
+    places = np.array([[3, 7, 5]])
     view[0, 5] = -np.inf
     bad, cmd = np.zeros(1, np.int64), np.array([[1.0, 0.0, 0.0]])
     for step in range(30):
@@ -215,12 +218,13 @@ def test_delivered_states_arrive_late_and_turn_stale():
             assert view[0, 5] == pytest.approx(t - delay)             # the newest arrived
             assert seen[0, :2] == pytest.approx([t, 0.0])             # extrapolated to now
             assert seen[0, 2] == world_step.FRESH
-        world_step.publish(step, T, np.array([[t, 0.0, 0.0]]), cmd, np.ones(1, bool), 0,
-                           delay, 0.0, 0.0, 1.0, bad, hist, arrive)
+            assert list(view[0, 6:]) == [3, 7, 5]
+        world_step.publish(step, T, np.array([[t, 0.0, 0.0]]), cmd, places, np.ones(1, bool),
+                           0, delay, 0.0, 0.0, 1.0, bad, hist, arrive)
     last = view[0, 5]
     for step in range(30, 80):                                        # dead: nothing sent
-        world_step.publish(step, T, np.zeros((1, 3)), cmd, np.zeros(1, bool), 0, delay, 0.0,
-                           0.0, 1.0, bad, hist, arrive)
+        world_step.publish(step, T, np.zeros((1, 3)), cmd, places, np.zeros(1, bool), 0,
+                           delay, 0.0, 0.0, 1.0, bad, hist, arrive)
         world_step.deliver(step * T, hist, arrive, view, 0.5, seen)
     assert view[0, 5] == pytest.approx(29 * T)
     assert last < view[0, 5]

@@ -424,7 +424,7 @@ def test_gcs_heartbeat_failsafe_holds_and_refuses_formation(make_rig):
 
 # --- parameters -------------------------------------------------------------------------
 NEW_VALUES = {"BS_K": 3.5, "BS_K_THETA": 2.5, "BS_D_MAX": 2.5, "BS_K_IJ": 2.0, "BS_A": 0.75,
-              "BS_B": 2.5, "BS_C": 4.5, "BS_U_MAX": 6.0, "BS_HYST": 0.25}
+              "BS_B": 2.5, "BS_C": 4.5, "BS_U_MAX": 6.0, "BS_HYST": 0.25, "BS_EXCHANGE": 2.0}
 
 
 def test_param_names_fit_mavlink():

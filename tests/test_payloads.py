@@ -26,8 +26,19 @@ def test_state_golden_bytes():
     assert len(data) == StateMsg.SIZE == 52
     assert data[:16] == bytes([1, 1, 3, 0, 7, 0, 0, 0]) + struct.pack("<d", 1_700_000_000.25)
     assert data[16:20] == bytes.fromhex("0000c03f")          # 1.5 as f32 LE
-    assert data[44:46] == bytes([2, 1]) and data[46:] == bytes(6)
+    assert data[44:46] == bytes([2, 1]) and data[46:] == bytes(6)    # no place exchange
     assert StateMsg.decode(data) == STATE
+
+
+def test_state_carries_the_place_exchange():
+    """slot, partner and other as u16, each + 1; zero bytes (an agent without them) read
+    as -1, none."""
+    msg = StateMsg(**{**STATE.__dict__, "slot": 0, "partner": 12, "other": 65534})
+    data = msg.encode()
+    assert data[46:] == struct.pack("<3H", 1, 13, 65535)
+    assert StateMsg.decode(data) == msg
+    with pytest.raises(ValueError, match="StateMsg.slot: 65535"):
+        StateMsg(**{**STATE.__dict__, "slot": 65535}).encode()
 
 
 @pytest.mark.parametrize("flags", [StateFlags(0), StateFlags.GOVERNED,

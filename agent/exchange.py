@@ -1,0 +1,159 @@
+"""Place exchange: two robots swap their places in the formation when both gain by it.
+
+The formation's places are a set: robot i holds place ``slot`` (an index into the
+mission's offsets, at first its own). Two robots that each stand nearer the other's
+place swap them when the sum of their squared distances to their places falls by more
+than ``gain_min`` [m^2] (CAPT's criterion, Turpin, Michael and Kumar 2014: pairwise, it
+never brings the sum up, so exchanges cannot cycle). A robot far behind the formation no
+longer crosses it to reach a place that a robot already there could take.
+
+The handshake runs in the state messages every robot publishes (slot, partner, other),
+over a link that delays and loses them, so each step is decided by one robot on what it
+has heard (docs/controller.md, A18):
+
+1. **Ask.** A robot i free for ``hold`` [s] asks the free neighbour j of higher id with the
+   largest gain: it publishes partner = j, other = j's place.
+2. **Give.** j, free, heard asked for its own place, checks the gain on its own data
+   (above 0) and takes i's place at once: slot = i's place, partner = i, other = its old
+   place.
+3. **Take.** i, hearing j in its place, takes ``other``; so does a robot that gave up
+   asking and then hears j name it from its place. j frees itself when it hears i in its
+   old place, or no longer asking, or silent for ``hold``.
+4. **Mend.** No handshake over a lossy link can make both sides sure of the other (the
+   two generals' problem), so an exchange can be left half done: i gave up before it
+   heard j give, and both hold i's place. A free robot that hears a robot of lower id in
+   its place leaves it for the nearest place that no robot it has heard of holds.
+
+An asker gives up when j is busy with another robot or has not given within ``hold``; it
+then waits ``hold`` before asking again, so that a late give mostly still finds it in its
+place. ``hold`` is two staleness limits.
+
+Plain floats, ints and arrays: agents run it interpreted, the batch simulator compiled
+(:mod:`firmware_sim.compiled`).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from agent.formation import reference_point
+
+NOBODY = -1     # no partner, no place
+
+
+class Exchange(NamedTuple):
+    """One robot's part in the exchanges: its place and the handshake in progress."""
+
+    slot: int               # its place: an index into the formation's offsets
+    partner: int = NOBODY   # the robot it asks or gives to
+    other: int = NOBODY     # the place that goes the other way (asked for, or given)
+    giving: bool = False    # it gave its place and waits for the partner to take it
+    since: float = -math.inf    # s, when it last asked, took, gave or gave up
+
+
+def place(offsets: np.ndarray, motion: np.ndarray, slot: int, t: float
+          ) -> tuple[float, float]:
+    """Where place ``slot`` is at time t [s]: x, y [m] (``motion``: centre0 x, y [m],
+    velocity x, y [m/s], omega [rad/s])."""
+    x, y, _, _ = reference_point(offsets[slot, 0], offsets[slot, 1], motion[0], motion[1],
+                                 motion[2], motion[3], motion[4], t)
+    return x, y
+
+
+def exchange_gain(x_i: float, y_i: float, gx_i: float, gy_i: float, x_j: float, y_j: float,
+                  gx_j: float, gy_j: float) -> float:
+    """How much [m^2] the sum of the squared distances of robots i and j (at x, y [m]) to
+    their places (gx, gy [m]) falls if they swap them: 2 (p_j - p_i) . (g_i - g_j)."""
+    return 2.0 * ((x_j - x_i) * (gx_i - gx_j) + (y_j - y_i) * (gy_i - gy_j))
+
+
+def free_place(x: float, y: float, t: float, slot: int, known_slot: np.ndarray,
+               offsets: np.ndarray, motion: np.ndarray) -> int:
+    """The place nearest to (x, y) [m] at time t [s] that no robot holds, as far as this
+    robot knows: ``known_slot`` the slot every robot last published (any age; NOBODY:
+    none), ``slot`` counted as held. NOBODY when every place is held."""
+    held = np.zeros(len(offsets), np.bool_)
+    held[slot] = True
+    for r in range(len(known_slot)):
+        if known_slot[r] >= 0:
+            held[int(known_slot[r])] = True
+    best, pick = math.inf, NOBODY
+    for s in range(len(offsets)):
+        if not held[s]:
+            px, py = place(offsets, motion, s, t)
+            d = (px - x) * (px - x) + (py - y) * (py - y)
+            if d < best:
+                best, pick = d, s
+    return pick
+
+
+def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: np.ndarray,
+                  nbr_x: np.ndarray, nbr_y: np.ndarray, nbr_slot: np.ndarray,
+                  nbr_partner: np.ndarray, nbr_other: np.ndarray, known_slot: np.ndarray,
+                  offsets: np.ndarray, motion: np.ndarray, gain_min: float, hold: float
+                  ) -> Exchange:
+    """Robot ``me`` (at x, y [m], believed) one period on, at time t [s]: its exchange
+    state after hearing its fresh neighbours (ids, positions [m], and the slot, partner and
+    other they last published; NOBODY where they published none), and what every robot
+    last published (:func:`free_place`). ``offsets`` (S, 2) [m] and ``motion`` give the
+    places (:func:`place`)."""
+    m = len(nbr_id)
+    if not ex.giving:
+        # a neighbour in this robot's place took it for it: the one asked, or one that
+        # names it (asked, and given up since)
+        for q in range(m):
+            if nbr_slot[q] == ex.slot:
+                if nbr_id[q] == ex.partner:
+                    return Exchange(ex.other, NOBODY, NOBODY, False, t)
+                if nbr_partner[q] == me and nbr_other[q] != NOBODY:
+                    return Exchange(nbr_other[q], NOBODY, NOBODY, False, t)
+    heard = -1
+    for q in range(m):
+        if nbr_id[q] == ex.partner:
+            heard = q
+    if ex.giving:
+        if heard >= 0 and (nbr_slot[heard] == ex.other or nbr_partner[heard] != me):
+            return Exchange(ex.slot, NOBODY, NOBODY, False, t)   # taken, or not asked
+        if heard < 0 and t - ex.since > hold:
+            return Exchange(ex.slot, NOBODY, NOBODY, False, t)   # the asker fell silent
+        return ex
+    if ex.partner != NOBODY:
+        busy = heard >= 0 and nbr_partner[heard] != NOBODY and nbr_partner[heard] != me
+        if busy or t - ex.since > hold:
+            return Exchange(ex.slot, NOBODY, NOBODY, False, t)   # give up, then wait
+        return ex
+    # a place two robots hold (an exchange left half done): the one of higher id leaves
+    # it for the nearest free one
+    for q in range(m):
+        if nbr_slot[q] == ex.slot and nbr_id[q] < me:
+            free = free_place(x, y, t, ex.slot, known_slot, offsets, motion)
+            if free != NOBODY:
+                return Exchange(free, NOBODY, NOBODY, False, t)
+    if t - ex.since < hold or gain_min <= 0.0:
+        return ex
+    gx, gy = place(offsets, motion, ex.slot, t)
+    # asked for this robot's place: give it to the asker that gains most
+    best, pick = 0.0, -1
+    for q in range(m):
+        if nbr_partner[q] == me and nbr_other[q] == ex.slot and nbr_slot[q] != NOBODY \
+                and nbr_slot[q] != ex.slot:
+            ox, oy = place(offsets, motion, nbr_slot[q], t)
+            gain = exchange_gain(x, y, gx, gy, nbr_x[q], nbr_y[q], ox, oy)
+            if gain > best:
+                best, pick = gain, q
+    if pick >= 0:
+        return Exchange(nbr_slot[pick], nbr_id[pick], ex.slot, True, t)
+    # ask the free neighbour of higher id that gains most
+    best, pick = gain_min, -1
+    for q in range(m):
+        if nbr_id[q] > me and nbr_partner[q] == NOBODY and nbr_slot[q] != NOBODY \
+                and nbr_slot[q] != ex.slot:
+            ox, oy = place(offsets, motion, nbr_slot[q], t)
+            gain = exchange_gain(x, y, gx, gy, nbr_x[q], nbr_y[q], ox, oy)
+            if gain > best:
+                best, pick = gain, q
+    if pick >= 0:
+        return Exchange(ex.slot, nbr_id[pick], nbr_slot[pick], False, t)
+    return ex

@@ -1,0 +1,112 @@
+"""The place exchange's handshake (agent.exchange), one robot's step at a time."""
+import numpy as np
+import pytest
+
+from agent.exchange import NOBODY, Exchange, exchange_gain, exchange_step
+
+OFFSETS = np.array([[4.0, 0.0], [-4.0, 0.0], [0.0, 8.0]])    # places 0, 1, 2 [m]
+MOTION = np.zeros(5)                                          # the places stand still
+HOLD = 1.0                                                    # s
+
+
+def step(me, xy, ex, nbrs, t=10.0, gain_min=1.0):
+    """Robot ``me`` at ``xy`` hearing ``nbrs``: (id, x, y, slot, partner, other) rows."""
+    rows = np.array(nbrs, dtype=float).reshape(-1, 6)
+    ints = rows[:, [0, 3, 4, 5]].astype(int)
+    return exchange_step(me, xy[0], xy[1], t, ex, ints[:, 0], rows[:, 1], rows[:, 2],
+                         ints[:, 1], ints[:, 2], ints[:, 3], rows[:, 3], OFFSETS, MOTION,
+                         gain_min, HOLD)
+
+
+def test_the_gain_is_the_fall_of_the_squared_distances():
+    p_i, g_i, p_j, g_j = np.array([-4.0, 1]), np.array([4.0, 0]), np.array([4.0, 2]), \
+        np.array([-4.0, 0])
+    before = np.sum((p_i - g_i) ** 2) + np.sum((p_j - g_j) ** 2)
+    after = np.sum((p_i - g_j) ** 2) + np.sum((p_j - g_i) ** 2)
+    assert exchange_gain(*p_i, *g_i, *p_j, *g_j) == pytest.approx(before - after)
+
+
+def test_a_robot_asks_the_neighbour_of_higher_id_standing_at_its_place():
+    ex = step(0, (-4.0, 0.0), Exchange(0), [(1, 4.0, 0.0, 1, NOBODY, NOBODY)])
+    assert ex == Exchange(0, 1, 1, False, 10.0)
+    # the robot of higher id waits to be asked
+    assert step(1, (4.0, 0.0), Exchange(1), [(0, -4.0, 0.0, 0, NOBODY, NOBODY)]) == Exchange(1)
+
+
+def test_no_ask_below_the_least_gain_or_to_a_busy_neighbour():
+    near = [(1, 0.03125, 0.0, 1, NOBODY, NOBODY)]      # with robot 0 at (0, 0): 0.5 m^2
+    assert step(0, (0.0, 0.0), Exchange(0), near, gain_min=1.0) == Exchange(0)
+    assert step(0, (0.0, 0.0), Exchange(0), near, gain_min=0.4).partner == 1
+    busy = [(1, 4.0, 0.0, 1, 2, 2)]
+    assert step(0, (-4.0, 0.0), Exchange(0), busy) == Exchange(0)
+    assert step(0, (-4.0, 0.0), Exchange(0), [(1, 4.0, 0.0, 1, NOBODY, NOBODY)],
+                gain_min=0.0) == Exchange(0)                              # exchange off
+
+
+def test_asked_a_robot_gives_its_place_when_its_own_data_shows_a_gain():
+    asker = [(0, -4.0, 0.0, 0, 1, 1)]
+    assert step(1, (4.0, 0.0), Exchange(1), asker) == Exchange(0, 0, 1, True, 10.0)
+    # on its own data the asker stands where it would lose: no give
+    far = [(0, 4.0, 6.0, 0, 1, 1)]
+    assert step(1, (4.0, 0.0), Exchange(1), far) == Exchange(1)
+    # an ask for another place is no ask for its own
+    assert step(1, (4.0, 0.0), Exchange(1), [(0, -4.0, 0.0, 0, 1, 2)]) == Exchange(1)
+
+
+def test_the_asker_takes_the_place_given_and_the_giver_frees_itself():
+    asking = Exchange(0, 1, 1, False, 9.0)
+    gave = [(1, 4.0, 0.0, 0, 0, 1)]                        # robot 1 holds place 0 now
+    assert step(0, (-4.0, 0.0), asking, gave) == Exchange(1, NOBODY, NOBODY, False, 10.0)
+    giving = Exchange(0, 0, 1, True, 9.5)
+    still = [(0, -4.0, 0.0, 0, 1, 1)]                      # not taken yet
+    assert step(1, (4.0, 0.0), giving, still) == giving
+    taken = [(0, -4.0, 0.0, 1, NOBODY, NOBODY)]
+    assert step(1, (4.0, 0.0), giving, taken) == Exchange(0, NOBODY, NOBODY, False, 10.0)
+
+
+def test_a_giver_waits_a_hold_for_a_silent_asker():
+    giving = Exchange(0, 0, 1, True, 9.5)
+    assert step(1, (4.0, 0.0), giving, [], t=10.0) == giving
+    assert step(1, (4.0, 0.0), giving, [], t=10.6) == Exchange(0, NOBODY, NOBODY, False, 10.6)
+
+
+def test_an_asker_gives_up_on_a_silent_or_busy_partner_then_waits_a_hold():
+    asking = Exchange(0, 1, 1, False, 9.5)
+    assert step(0, (-4.0, 0.0), asking, []) == asking          # silent for a moment: wait
+    assert step(0, (-4.0, 0.0), asking, [], t=10.6) == Exchange(0, NOBODY, NOBODY, False,
+                                                                 10.6)
+    busy = [(1, 4.0, 0.0, 1, 2, 2)]
+    gave_up = step(0, (-4.0, 0.0), asking, busy)
+    assert gave_up == Exchange(0, NOBODY, NOBODY, False, 10.0)
+    free = [(1, 4.0, 0.0, 1, NOBODY, NOBODY)]
+    assert step(0, (-4.0, 0.0), gave_up, free, t=10.5) == gave_up      # within the hold
+    assert step(0, (-4.0, 0.0), gave_up, free, t=11.0).partner == 1
+    # no give within a hold of asking: give up
+    assert step(0, (-4.0, 0.0), asking, free, t=10.51) == Exchange(0, NOBODY, NOBODY, False,
+                                                                   10.51)
+
+
+def test_a_give_heard_after_giving_up_still_completes_the_exchange():
+    gave_up = Exchange(0, NOBODY, NOBODY, False, 9.9)
+    late = [(1, 4.0, 0.0, 0, 0, 1)]                        # robot 1 gave: it names robot 0
+    assert step(0, (-4.0, 0.0), gave_up, late) == Exchange(1, NOBODY, NOBODY, False, 10.0)
+
+
+def test_a_giver_frees_itself_when_the_asker_no_longer_asks():
+    giving = Exchange(0, 0, 1, True, 9.9)
+    gave_up = [(0, -4.0, 0.0, 0, NOBODY, NOBODY)]          # robot 0 still at place 0
+    assert step(1, (4.0, 0.0), giving, gave_up) == Exchange(0, NOBODY, NOBODY, False, 10.0)
+
+
+def test_of_two_robots_in_one_place_the_higher_id_takes_the_nearest_free_one():
+    """Robots 0 and 1 both hold place 0 (an exchange left half done); robot 2 holds place
+    2: robot 1 takes place 1, the only one free, and robot 0 keeps place 0."""
+    free = Exchange(0, NOBODY, NOBODY, False, 5.0)
+    heard = [(0, -4.0, 0.0, 0, NOBODY, NOBODY), (2, 0.0, 8.0, 2, NOBODY, NOBODY)]
+    assert step(1, (4.0, 0.0), free, heard) == Exchange(1, NOBODY, NOBODY, False, 10.0)
+    heard = [(1, 4.0, 0.0, 0, NOBODY, NOBODY), (2, 0.0, 8.0, 2, NOBODY, NOBODY)]
+    assert step(0, (-4.0, 0.0), free, heard, gain_min=0.0) == free
+    # no place free (robot 3 holds place 2): it stays
+    heard = [(0, -4.0, 0.0, 0, NOBODY, NOBODY), (2, 0.0, 8.0, 1, NOBODY, NOBODY),
+             (3, 9.0, 9.0, 2, NOBODY, NOBODY)]
+    assert step(1, (4.0, 0.0), free, heard, gain_min=0.0) == free
