@@ -148,6 +148,29 @@ def test_sitl_paper_scenario(launch):
     assert gap.max() < 0.5, gap.max()
 
 
+@pytest.mark.flaky(reruns=1)      # wall clock, as test_sitl_paper_scenario
+def test_sitl_agents_exchange_places_over_their_state_messages(launch, tmp_path):
+    """Robots 1 and 3 of sitl_small start at each other's places: their agents exchange
+    places over Zenoh (agent.exchange), and the run measures every robot against the place
+    it holds."""
+    text = (SCENARIOS / "sitl_small.toml").read_text()
+    for old, new in (("[-12.0, -4.5, 0.0]", "[-12.0, 4.5, 0.0]"),
+                     ("[-12.0, 4.0, 0.0]", "[-12.0, -4.0, 0.0]")):
+        assert old in text
+        text = text.replace(old, new)
+    scenario = tmp_path / "exchange.toml"
+    scenario.write_text(text)
+    run = launch(str(scenario), "--duration", "15")
+    code, out = run.wait(timeout=120)
+    assert code == 0, out
+    m = json.loads((run.out / "metrics.json").read_text())
+    assert m["place_changes"] >= 2 and m["shared_places"] == []
+    assert m["converged"] and m["collisions"] == 0
+    last = {msg["robot_id"]: msg["slot"] for _, kind, _, msg in read_messages(run.out / "run.mcap")
+            if kind == "state"}
+    assert last == {1: 2, 2: 1, 3: 0}        # each at the place on its side of the line
+
+
 def test_mission_misses_are_the_overruns_between_epoch_and_end():
     from hil.sitl_report import missed_in
     loop = {"overruns": 6, "overrun_events": [[99.5, 1], [100.0, 2], [107.2, 1], [110.1, 2]]}
