@@ -16,13 +16,15 @@ has heard (docs/controller.md, A18):
 2. **Give.** j, free, heard asked for its own place, checks the gain on its own data
    (above 0) and takes i's place at once: slot = i's place, partner = i, other = its old
    place.
-3. **Take.** i, hearing j in its place, takes ``other``; so does a robot that gave up
-   asking and then hears j name it from its place. j frees itself when it hears i in its
-   old place, or no longer asking, or silent for ``hold``.
+3. **Take.** i, hearing j in its place (by j's newest state, in range or not), takes
+   ``other``; so does a robot that gave up asking and then hears j name it from its
+   place. j frees itself when it hears i in its old place, or no longer asking (then, if
+   i stayed in its place, j takes its own back), or silent for ``hold``.
 4. **Mend.** No handshake over a lossy link can make both sides sure of the other (the
-   two generals' problem), so an exchange can be left half done: i gave up before it
-   heard j give, and both hold i's place. A free robot that hears a robot of lower id in
-   its place leaves it for the nearest place that no robot it has heard of holds.
+   two generals' problem), so an exchange can be left half done: i gave up, then heard
+   j's give late while j took its place back, and both hold j's old place. A free robot
+   that hears a robot of lower id in its place leaves it for the nearest place that no
+   robot it has heard of holds.
 
 An asker gives up when j is busy with another robot or has not given within ``hold``; it
 then waits ``hold`` before asking again, so that a late give mostly still finds it in its
@@ -91,36 +93,35 @@ def free_place(x: float, y: float, t: float, slot: int, known_slot: np.ndarray,
 
 def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: np.ndarray,
                   nbr_x: np.ndarray, nbr_y: np.ndarray, nbr_slot: np.ndarray,
-                  nbr_partner: np.ndarray, nbr_other: np.ndarray, known_slot: np.ndarray,
+                  nbr_partner: np.ndarray, nbr_other: np.ndarray, pal_slot: int,
+                  pal_partner: int, pal_age: float, known_slot: np.ndarray,
                   offsets: np.ndarray, motion: np.ndarray, gain_min: float, hold: float
                   ) -> Exchange:
     """Robot ``me`` (at x, y [m], believed) one period on, at time t [s]: its exchange
-    state after hearing its fresh neighbours (ids, positions [m], and the slot, partner and
-    other they last published; NOBODY where they published none), and what every robot
-    last published (:func:`free_place`). ``offsets`` (S, 2) [m] and ``motion`` give the
-    places (:func:`place`)."""
+    state after hearing its fresh neighbours in range (ids, positions [m], and the slot,
+    partner and other they last published; NOBODY where they published none), its partner
+    (the slot and partner it last published, and that state's age [s]; NOBODY and inf
+    when it has none or never heard it), whatever its range, and what every robot last
+    published (:func:`free_place`). ``offsets`` (S, 2) [m] and ``motion`` give the places
+    (:func:`place`)."""
     m = len(nbr_id)
-    if not ex.giving:
-        # a neighbour in this robot's place took it for it: the one asked, or one that
-        # names it (asked, and given up since)
-        for q in range(m):
-            if nbr_slot[q] == ex.slot:
-                if nbr_id[q] == ex.partner:
-                    return Exchange(ex.other, NOBODY, NOBODY, False, t)
-                if nbr_partner[q] == me and nbr_other[q] != NOBODY:
-                    return Exchange(nbr_other[q], NOBODY, NOBODY, False, t)
-    heard = -1
-    for q in range(m):
-        if nbr_id[q] == ex.partner:
-            heard = q
     if ex.giving:
-        if heard >= 0 and (nbr_slot[heard] == ex.other or nbr_partner[heard] != me):
-            return Exchange(ex.slot, NOBODY, NOBODY, False, t)   # taken, or not asked
-        if heard < 0 and t - ex.since > hold:
-            return Exchange(ex.slot, NOBODY, NOBODY, False, t)   # the asker fell silent
+        if pal_slot == ex.other:                                 # taken
+            return Exchange(ex.slot, NOBODY, NOBODY, False, t)
+        if pal_age <= hold and pal_partner != me:                # heard no longer asking:
+            if pal_slot == ex.slot:                              # it stayed, so take back
+                return Exchange(ex.other, NOBODY, NOBODY, False, t)   # the place given
+            return Exchange(ex.slot, NOBODY, NOBODY, False, t)
+        if pal_age > hold and t - ex.since > hold:               # the asker fell silent
+            return Exchange(ex.slot, NOBODY, NOBODY, False, t)
         return ex
+    if ex.partner != NOBODY and pal_slot == ex.slot:      # the robot asked gave its place
+        return Exchange(ex.other, NOBODY, NOBODY, False, t)
+    for q in range(m):       # one that names this robot from its place: it gave, late
+        if nbr_slot[q] == ex.slot and nbr_partner[q] == me and nbr_other[q] != NOBODY:
+            return Exchange(nbr_other[q], NOBODY, NOBODY, False, t)
     if ex.partner != NOBODY:
-        busy = heard >= 0 and nbr_partner[heard] != NOBODY and nbr_partner[heard] != me
+        busy = pal_partner != NOBODY and pal_partner != me
         if busy or t - ex.since > hold:
             return Exchange(ex.slot, NOBODY, NOBODY, False, t)   # give up, then wait
         return ex

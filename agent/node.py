@@ -384,21 +384,26 @@ class Agent:
 
     def _exchange_places(self, pose: tuple[float, float, float], near: InRange,
                          neighbours: Mapping[int, Received[StateMsg]],
-                         places: tuple[np.ndarray, np.ndarray], t: float) -> None:
+                         places: tuple[np.ndarray, np.ndarray], t: float, now_w: float
+                         ) -> None:
         """One step of the place exchange (agent.exchange) with the fresh neighbours in
-        range, at mission time t [s]; a changed place moves the law's remembered error."""
+        range, at mission time t [s] (UNIX time now_w [s]); a changed place moves the law's
+        remembered error."""
         gain_min = self._law_params.exchange
         if gain_min <= 0.0:
             return
         msgs = [neighbours[rid].msg for rid in near.fresh_id]
         known = [r.msg for rid, r in neighbours.items() if rid != self.s.robot_id]
         was = self.exchange
+        pal = neighbours.get(was.partner) if was.partner != NOBODY else None
         self.exchange = exchange_step(
             self.s.robot_id, pose[0], pose[1], t, was, np.array(near.fresh_id, dtype=int),
             np.array(near.fresh_x), np.array(near.fresh_y),
             np.array([m.slot for m in msgs], dtype=int),
             np.array([m.partner for m in msgs], dtype=int),
             np.array([m.other for m in msgs], dtype=int),
+            NOBODY if pal is None else pal.msg.slot, NOBODY if pal is None else pal.msg.partner,
+            math.inf if pal is None else now_w - pal.msg.stamp,
             np.array([m.slot for m in known], dtype=float), *places, gain_min,
             2.0 * self.s.timeouts.staleness)
         if self.exchange.slot != was.slot:
@@ -423,7 +428,7 @@ class Agent:
             return 0.0, 0.0
         t = now_w - mission.epoch
         near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
-        self._exchange_places(pose, near, neighbours, places, t)
+        self._exchange_places(pose, near, neighbours, places, t, now_w)
         offsets, motion = places
         slot = self.exchange.slot
         rx, ry, rvx, rvy = reference_point(offsets[slot, 0], offsets[slot, 1], motion[0],

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from agent.exchange import Exchange, exchange_step, place
+from agent.exchange import NOBODY, Exchange, exchange_step, place
 from agent.formation import reference_point
 from agent.governor import (
     NO_GAPS,
@@ -346,10 +346,14 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             for q in range(m):
                 j = nbr_j[q]
                 nbr_s[q], nbr_p[q], nbr_o[q] = int(view[j, 6]), int(view[j, 7]), int(view[j, 8])
-            was = ex.slot
+            was, pal = ex.slot, ex.partner
+            pal_slot, pal_partner, pal_age = NOBODY, NOBODY, math.inf
+            if pal != NOBODY and view[pal, 5] > -math.inf:
+                pal_slot, pal_partner = int(view[pal, 6]), int(view[pal, 7])
+                pal_age = t - view[pal, 5]
             ex = exchange_step(i, x, y, t, ex, nbr_j[:m], nbr_x[:m], nbr_y[:m], nbr_s[:m],
-                               nbr_p[:m], nbr_o[:m], view[:, 6], offsets, motion,
-                               p.exchange, 2.0 * staleness)
+                               nbr_p[:m], nbr_o[:m], pal_slot, pal_partner, pal_age,
+                               view[:, 6], offsets, motion, p.exchange, 2.0 * staleness)
             if ex.slot != was:      # the error's finite difference sees no jump
                 ox, oy = place(offsets, motion, was, t)
                 nx, ny = place(offsets, motion, ex.slot, t)

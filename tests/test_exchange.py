@@ -1,4 +1,6 @@
 """The place exchange's handshake (agent.exchange), one robot's step at a time."""
+import math
+
 import numpy as np
 import pytest
 
@@ -10,12 +12,16 @@ HOLD = 1.0                                                    # s
 
 
 def step(me, xy, ex, nbrs, t=10.0, gain_min=1.0):
-    """Robot ``me`` at ``xy`` hearing ``nbrs``: (id, x, y, slot, partner, other) rows."""
+    """Robot ``me`` at ``xy`` hearing ``nbrs``: (id, x, y, slot, partner, other) rows, the
+    row of its partner (if any) also as the partner's newest state, heard now."""
     rows = np.array(nbrs, dtype=float).reshape(-1, 6)
     ints = rows[:, [0, 3, 4, 5]].astype(int)
+    pal = [r for r in ints if r[0] == ex.partner]
+    pal_slot, pal_partner, pal_age = (pal[0][1], pal[0][2], 0.0) if pal else (NOBODY, NOBODY,
+                                                                             math.inf)
     return exchange_step(me, xy[0], xy[1], t, ex, ints[:, 0], rows[:, 1], rows[:, 2],
-                         ints[:, 1], ints[:, 2], ints[:, 3], rows[:, 3], OFFSETS, MOTION,
-                         gain_min, HOLD)
+                         ints[:, 1], ints[:, 2], ints[:, 3], pal_slot, pal_partner, pal_age,
+                         rows[:, 3], OFFSETS, MOTION, gain_min, HOLD)
 
 
 def test_the_gain_is_the_fall_of_the_squared_distances():
@@ -92,10 +98,22 @@ def test_a_give_heard_after_giving_up_still_completes_the_exchange():
     assert step(0, (-4.0, 0.0), gave_up, late) == Exchange(1, NOBODY, NOBODY, False, 10.0)
 
 
-def test_a_giver_frees_itself_when_the_asker_no_longer_asks():
+def test_a_giver_takes_its_place_back_when_the_asker_stayed_and_no_longer_asks():
     giving = Exchange(0, 0, 1, True, 9.9)
-    gave_up = [(0, -4.0, 0.0, 0, NOBODY, NOBODY)]          # robot 0 still at place 0
-    assert step(1, (4.0, 0.0), giving, gave_up) == Exchange(0, NOBODY, NOBODY, False, 10.0)
+    stayed = [(0, -4.0, 0.0, 0, NOBODY, NOBODY)]          # robot 0 still at place 0
+    assert step(1, (4.0, 0.0), giving, stayed) == Exchange(1, NOBODY, NOBODY, False, 10.0)
+    moved_on = [(0, -4.0, 0.0, 2, NOBODY, NOBODY)]        # robot 0 took place 2 meanwhile
+    assert step(1, (4.0, 0.0), giving, moved_on) == Exchange(0, NOBODY, NOBODY, False, 10.0)
+
+
+def test_the_partners_newest_state_counts_out_of_range():
+    """The asker hears its partner give by the partner's newest state, even one out of
+    sensing range (not among the fresh neighbours)."""
+    asking = Exchange(0, 1, 1, False, 9.8)
+    ex = exchange_step(0, -4.0, 0.0, 10.0, asking, np.zeros(0, int), np.zeros(0), np.zeros(0),
+                       np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), 0, 0, 0.6,
+                       np.zeros(0), OFFSETS, MOTION, 1.0, HOLD)
+    assert ex == Exchange(1, NOBODY, NOBODY, False, 10.0)
 
 
 def test_of_two_robots_in_one_place_the_higher_id_takes_the_nearest_free_one():
