@@ -134,27 +134,36 @@ def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: n
                 return Exchange(free, NOBODY, NOBODY, False, t)
     if t - ex.since < hold or gain_min <= 0.0:
         return ex
-    gx, gy = place(offsets, motion, ex.slot, t)
-    # asked for this robot's place: give it to the asker that gains most
-    best, pick = 0.0, -1
-    for q in range(m):
-        if nbr_partner[q] == me and nbr_other[q] == ex.slot and nbr_slot[q] != NOBODY \
-                and nbr_slot[q] != ex.slot:
-            ox, oy = place(offsets, motion, nbr_slot[q], t)
-            gain = exchange_gain(x, y, gx, gy, nbr_x[q], nbr_y[q], ox, oy)
-            if gain > best:
-                best, pick = gain, q
-    if pick >= 0:
-        return Exchange(nbr_slot[pick], nbr_id[pick], ex.slot, True, t)
-    # ask the free neighbour of higher id that gains most
-    best, pick = gain_min, -1
-    for q in range(m):
-        if nbr_id[q] > me and nbr_partner[q] == NOBODY and nbr_slot[q] != NOBODY \
-                and nbr_slot[q] != ex.slot:
-            ox, oy = place(offsets, motion, nbr_slot[q], t)
-            gain = exchange_gain(x, y, gx, gy, nbr_x[q], nbr_y[q], ox, oy)
-            if gain > best:
-                best, pick = gain, q
-    if pick >= 0:
-        return Exchange(ex.slot, nbr_id[pick], nbr_slot[pick], False, t)
+    # asked for this robot's place: give it to the asker that gains most; else ask the
+    # free neighbour of higher id that gains most
+    q = _best(me, x, y, t, ex.slot, True, nbr_id, nbr_x, nbr_y, nbr_slot, nbr_partner,
+              nbr_other, offsets, motion, 0.0)
+    if q >= 0:
+        return Exchange(nbr_slot[q], nbr_id[q], ex.slot, True, t)
+    q = _best(me, x, y, t, ex.slot, False, nbr_id, nbr_x, nbr_y, nbr_slot, nbr_partner,
+              nbr_other, offsets, motion, gain_min)
+    if q >= 0:
+        return Exchange(ex.slot, nbr_id[q], nbr_slot[q], False, t)
     return ex
+
+
+def _best(me: int, x: float, y: float, t: float, slot: int, asked: bool, nbr_id: np.ndarray,
+          nbr_x: np.ndarray, nbr_y: np.ndarray, nbr_slot: np.ndarray,
+          nbr_partner: np.ndarray, nbr_other: np.ndarray, offsets: np.ndarray,
+          motion: np.ndarray, least: float) -> int:
+    """The neighbour (its index; -1: none) with the largest gain above ``least`` [m^2] of
+    those that ask robot ``me`` for its place ``slot`` (``asked``), or else of the free
+    ones of higher id."""
+    gx, gy = place(offsets, motion, slot, t)
+    best, pick = least, -1
+    for q in range(len(nbr_id)):
+        if asked:
+            candidate = nbr_partner[q] == me and nbr_other[q] == slot
+        else:
+            candidate = nbr_id[q] > me and nbr_partner[q] == NOBODY
+        if candidate and nbr_slot[q] != NOBODY and nbr_slot[q] != slot:
+            ox, oy = place(offsets, motion, nbr_slot[q], t)
+            gain = exchange_gain(x, y, gx, gy, nbr_x[q], nbr_y[q], ox, oy)
+            if gain > best:
+                best, pick = gain, q
+    return pick
