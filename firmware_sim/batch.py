@@ -217,7 +217,6 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         max_v, max_u, switches, all_within = k.period_summary(
             pose, cmd, ref, control.K, TOLERANCE_MARGIN, step == 0, w.alive, last_mode, err,
             within)
-        all_within = all_within and not metrics.shared_places
         metrics.observe_period(t, max_v, max_u, switches, err, within, all_within)
         metrics.observe_governor(cmd[:, 3], w.alive)
         if every and step % every == 0:

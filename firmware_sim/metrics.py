@@ -112,7 +112,7 @@ class RunMetrics:
         self.max_abs_v = max(self.max_abs_v, max_abs_v)
         self.max_abs_u = max(self.max_abs_u, max_abs_u)
         self.mode_switches += switches
-        if not all_within:
+        if not all_within or self.shared_places:     # two robots in one place: not yet
             self._last_bad_t = t
         self._seen_t.append(t)
         self._final_err, self._final_within = error, within
@@ -124,8 +124,8 @@ class RunMetrics:
     def observe_places(self, slots: np.ndarray, before: np.ndarray, alive: np.ndarray
                        ) -> None:
         """A period's places (:mod:`agent.exchange`): each robot's slot now and the period
-        before. A formation whose live robots share a place is not within tolerance (the
-        callers' ``all_within`` of :meth:`observe_period`)."""
+        before. Until the next, :meth:`observe_period` counts a formation whose live robots
+        share a place as not within tolerance."""
         self.place_changes += int(np.count_nonzero(slots != before))
         live = slots[alive]
         if len(np.unique(live)) == len(live):

@@ -152,7 +152,6 @@ def analyse_recording(path: Path, sc: Scenario, killed: Mapping[int, float] | No
             pose[k], cmd, np.column_stack([ref[k], ref_vel[k]]), sc.control.K,
             TOLERANCE_MARGIN, k == 0, alive, last_mode, err, within)
         metrics.observe_places(slots[k], slots[max(k - 1, 0)], alive)
-        all_within = all_within and not metrics.shared_places
         metrics.observe_period(float(tk), max_v, max_u, switches, err, within, all_within)
     data = RunData(ids=sc.ids, t=t, pose=pose, v=v, u=u, mode=mode, ref=ref,
                    dist_t=np.asarray(metrics.geometry_t),

@@ -97,3 +97,18 @@ def test_mode_switches_are_counted():
                                  within)
         m.observe_period(0.0, summary[0], summary[1], summary[2], err, within, summary[3])
     assert m.summary("x", 1.0)["mode_switches"] == 4
+
+
+def test_two_live_robots_in_one_place_are_not_converged():
+    """Every robot within tolerance, but robots 1 and 2 hold place 0: not converged until
+    they hold distinct places; a dead robot's place does not count."""
+    m = RunMetrics(ids=np.array([1, 2, 3]), a=1.0)
+    within, err = np.ones(3, bool), np.zeros(3)
+    alive = np.array([True, True, False])
+    m.observe_places(np.array([0, 0, 2]), np.array([0, 1, 2]), alive)
+    m.observe_period(0.0, 0.0, 0.0, 0, err, within, True)
+    assert m.shared_places == [1, 2] and m.convergence_time is None
+    m.observe_places(np.array([0, 1, 1]), np.array([0, 0, 2]), alive)
+    m.observe_period(0.02, 0.0, 0.0, 0, err, within, True)
+    assert m.shared_places == [] and m.convergence_time == pytest.approx(0.02)
+    assert m.place_changes == 3
