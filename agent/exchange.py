@@ -36,11 +36,22 @@ Plain floats, ints and arrays: agents run it interpreted, the batch simulator co
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from agent.formation import reference_point
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from typing import TypeAlias
+
+    import numpy.typing as npt
+
+    from agent.avoidance import FloatSeq
+
+    # Ints: a list in an agent, an array compiled.
+    IntSeq: TypeAlias = Sequence[int] | npt.NDArray[np.int64]
 
 NOBODY = -1     # no partner, no place
 
@@ -71,7 +82,7 @@ def exchange_gain(x_i: float, y_i: float, gx_i: float, gy_i: float, x_j: float, 
     return 2.0 * ((x_j - x_i) * (gx_i - gx_j) + (y_j - y_i) * (gy_i - gy_j))
 
 
-def free_place(x: float, y: float, t: float, slot: int, known_slot: np.ndarray,
+def free_place(x: float, y: float, t: float, slot: int, known_slot: FloatSeq,
                offsets: np.ndarray, motion: np.ndarray) -> int:
     """The place nearest to (x, y) [m] at time t [s] that no robot holds, as far as this
     robot knows: ``known_slot`` the slot every robot last published (any age; NOBODY:
@@ -91,10 +102,10 @@ def free_place(x: float, y: float, t: float, slot: int, known_slot: np.ndarray,
     return pick
 
 
-def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: np.ndarray,
-                  nbr_x: np.ndarray, nbr_y: np.ndarray, nbr_slot: np.ndarray,
-                  nbr_partner: np.ndarray, nbr_other: np.ndarray, pal_slot: int,
-                  pal_partner: int, pal_age: float, known_slot: np.ndarray,
+def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: IntSeq,
+                  nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_slot: IntSeq, nbr_partner: IntSeq,
+                  nbr_other: IntSeq, pal_slot: int, pal_partner: int, pal_age: float,
+                  known_slot: FloatSeq,
                   offsets: np.ndarray, motion: np.ndarray, gain_min: float, hold: float
                   ) -> Exchange:
     """Robot ``me`` (at x, y [m], believed) one period on, at time t [s]: its exchange
@@ -147,9 +158,9 @@ def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: n
     return ex
 
 
-def _best(me: int, x: float, y: float, t: float, slot: int, asked: bool, nbr_id: np.ndarray,
-          nbr_x: np.ndarray, nbr_y: np.ndarray, nbr_slot: np.ndarray,
-          nbr_partner: np.ndarray, nbr_other: np.ndarray, offsets: np.ndarray,
+def _best(me: int, x: float, y: float, t: float, slot: int, asked: bool, nbr_id: IntSeq,
+          nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_slot: IntSeq, nbr_partner: IntSeq,
+          nbr_other: IntSeq, offsets: np.ndarray,
           motion: np.ndarray, least: float) -> int:
     """The neighbour (its index; -1: none) with the largest gain above ``least`` [m^2] of
     those that ask robot ``me`` for its place ``slot`` (``asked``), or else of the free

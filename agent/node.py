@@ -397,14 +397,12 @@ class Agent:
         was = self.exchange
         pal = neighbours.get(was.partner) if was.partner != NOBODY else None
         self.exchange = exchange_step(
-            self.s.robot_id, pose[0], pose[1], t, was, np.array(near.fresh_id, dtype=int),
-            np.array(near.fresh_x), np.array(near.fresh_y),
-            np.array([m.slot for m in msgs], dtype=int),
-            np.array([m.partner for m in msgs], dtype=int),
-            np.array([m.other for m in msgs], dtype=int),
+            self.s.robot_id, pose[0], pose[1], t, was, near.fresh_id, near.fresh_x,
+            near.fresh_y, [m.slot for m in msgs], [m.partner for m in msgs],
+            [m.other for m in msgs],
             NOBODY if pal is None else pal.msg.slot, NOBODY if pal is None else pal.msg.partner,
             math.inf if pal is None else now_w - pal.msg.stamp,
-            np.array([m.slot for m in known], dtype=float), *places, gain_min,
+            [float(m.slot) for m in known], *places, gain_min,
             2.0 * self.s.timeouts.staleness)
         if self.exchange.slot != was.slot:
             self.counters.place_changes += 1
