@@ -32,6 +32,22 @@ def test_the_gain_is_the_fall_of_the_squared_distances():
     assert exchange_gain(*p_i, *g_i, *p_j, *g_j) == pytest.approx(before - after)
 
 
+def test_the_gain_takes_the_places_where_a_moving_formation_has_them():
+    # at t = 10 s a formation centred at (20, 0), turning at pi/20 rad/s, has turned its
+    # places 0 and 1 a quarter turn: place 0 at (20, 4), place 1 at (20, -4)
+    turning = np.array([0.0, 0.0, 2.0, 0.0, math.pi / 20.0])
+    ex = exchange_step(0, 20.0, -4.0, 10.0, Exchange(0), np.array([1]), np.array([20.0]),
+                       np.array([4.0]), np.array([1]), np.array([NOBODY]),
+                       np.array([NOBODY]), NOBODY, NOBODY, math.inf, np.array([1.0]),
+                       OFFSETS, turning, 1.0, HOLD)
+    assert ex == Exchange(0, 1, 1, False, 10.0)      # each stands at the other's place
+    stay = exchange_step(0, 20.0, 4.0, 10.0, Exchange(0), np.array([1]), np.array([20.0]),
+                         np.array([-4.0]), np.array([1]), np.array([NOBODY]),
+                         np.array([NOBODY]), NOBODY, NOBODY, math.inf, np.array([1.0]),
+                         OFFSETS, turning, 1.0, HOLD)
+    assert stay == Exchange(0)                       # each at its own: nothing to gain
+
+
 def test_a_robot_asks_the_neighbour_of_higher_id_standing_at_its_place():
     ex = step(0, (-4.0, 0.0), Exchange(0), [(1, 4.0, 0.0, 1, NOBODY, NOBODY)])
     assert ex == Exchange(0, 1, 1, False, 10.0)
