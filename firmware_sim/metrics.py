@@ -126,7 +126,10 @@ class RunMetrics:
         """A period's places (:mod:`agent.exchange`): each robot's slot now and the period
         before. Until the next, :meth:`observe_period` counts a formation whose live robots
         share a place as not within tolerance."""
-        self.place_changes += int(np.count_nonzero(slots != before))
+        changed = int(np.count_nonzero(slots != before))
+        self.place_changes += changed
+        if changed == 0 and not self.shared_places:
+            return      # none changed: none shared now (a death only ends a sharing)
         live = slots[alive]
         if len(np.unique(live)) == len(live):
             self.shared_places = []

@@ -112,3 +112,14 @@ def test_two_live_robots_in_one_place_are_not_converged():
     m.observe_period(0.02, 0.0, 0.0, 0, err, within, True)
     assert m.shared_places == [] and m.convergence_time == pytest.approx(0.02)
     assert m.place_changes == 3
+
+
+def test_a_shared_place_lasts_until_changed_or_ended_by_a_death():
+    """Periods in which no slot changes keep a sharing, and a robot's death ends it."""
+    m = RunMetrics(ids=np.array([1, 2, 3]), a=1.0)
+    slots = np.array([0, 0, 2])
+    m.observe_places(slots, np.array([0, 1, 2]), np.ones(3, bool))
+    m.observe_places(slots, slots, np.ones(3, bool))
+    assert m.shared_places == [1, 2]
+    m.observe_places(slots, slots, np.array([True, False, True]))
+    assert m.shared_places == [] and m.place_changes == 1
