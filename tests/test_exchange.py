@@ -11,9 +11,10 @@ MOTION = np.zeros(5)                                          # the places stand
 HOLD = 1.0                                                    # s
 
 
-def step(me, xy, ex, nbrs, t=10.0, gain_min=1.0):
+def step(me, xy, ex, nbrs, t=10.0, gain_min=1.0, motion=MOTION):
     """Robot ``me`` at ``xy`` hearing ``nbrs``: (id, x, y, slot, partner, other) rows, the
-    row of its partner (if any) also as the partner's newest state, heard now."""
+    row of its partner (if any) also as the partner's newest state, heard now; the
+    formation moving as ``motion``."""
     rows = np.array(nbrs, dtype=float).reshape(-1, 6)
     ints = rows[:, [0, 3, 4, 5]].astype(int)
     pal = [r for r in ints if r[0] == ex.partner]
@@ -21,7 +22,7 @@ def step(me, xy, ex, nbrs, t=10.0, gain_min=1.0):
                                                                              math.inf)
     return exchange_step(me, xy[0], xy[1], t, ex, ints[:, 0], rows[:, 1], rows[:, 2],
                          ints[:, 1], ints[:, 2], ints[:, 3], pal_slot, pal_partner, pal_age,
-                         rows[:, 3], OFFSETS, MOTION, gain_min, HOLD)
+                         rows[:, 3], OFFSETS, motion, gain_min, HOLD)
 
 
 def test_the_gain_is_the_fall_of_the_squared_distances():
@@ -36,15 +37,11 @@ def test_the_gain_takes_the_places_where_a_moving_formation_has_them():
     # at t = 10 s a formation centred at (20, 0), turning at pi/20 rad/s, has turned its
     # places 0 and 1 a quarter turn: place 0 at (20, 4), place 1 at (20, -4)
     turning = np.array([0.0, 0.0, 2.0, 0.0, math.pi / 20.0])
-    ex = exchange_step(0, 20.0, -4.0, 10.0, Exchange(0), np.array([1]), np.array([20.0]),
-                       np.array([4.0]), np.array([1]), np.array([NOBODY]),
-                       np.array([NOBODY]), NOBODY, NOBODY, math.inf, np.array([1.0]),
-                       OFFSETS, turning, 1.0, HOLD)
+    ex = step(0, (20.0, -4.0), Exchange(0), [(1, 20.0, 4.0, 1, NOBODY, NOBODY)],
+              motion=turning)
     assert ex == Exchange(0, 1, 1, False, 10.0)      # each stands at the other's place
-    stay = exchange_step(0, 20.0, 4.0, 10.0, Exchange(0), np.array([1]), np.array([20.0]),
-                         np.array([-4.0]), np.array([1]), np.array([NOBODY]),
-                         np.array([NOBODY]), NOBODY, NOBODY, math.inf, np.array([1.0]),
-                         OFFSETS, turning, 1.0, HOLD)
+    stay = step(0, (20.0, 4.0), Exchange(0), [(1, 20.0, -4.0, 1, NOBODY, NOBODY)],
+                motion=turning)
     assert stay == Exchange(0)                       # each at its own: nothing to gain
 
 
