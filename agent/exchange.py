@@ -30,8 +30,8 @@ An asker gives up when j is busy with another robot or has not given within ``ho
 then waits ``hold`` before asking again, so that a late give mostly still finds it in its
 place. ``hold`` is two staleness limits.
 
-Plain floats, ints and arrays: agents run it interpreted, the batch simulator compiled
-(:mod:`firmware_sim.compiled`).
+Plain floats and ints, and lists or arrays: agents run it interpreted on lists, the batch
+simulator compiled on arrays (:mod:`firmware_sim.compiled`).
 """
 from __future__ import annotations
 
@@ -105,9 +105,8 @@ def free_place(x: float, y: float, t: float, slot: int, known_slot: FloatSeq,
 def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: IntSeq,
                   nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_slot: IntSeq, nbr_partner: IntSeq,
                   nbr_other: IntSeq, pal_slot: int, pal_partner: int, pal_age: float,
-                  known_slot: FloatSeq,
-                  offsets: np.ndarray, motion: np.ndarray, gain_min: float, hold: float
-                  ) -> Exchange:
+                  known_slot: FloatSeq, offsets: np.ndarray, motion: np.ndarray,
+                  gain_min: float, hold: float) -> Exchange:
     """Robot ``me`` (at x, y [m], believed) one period on, at time t [s]: its exchange
     state after hearing its fresh neighbours in range (ids, positions [m], and the slot,
     partner and other they last published; NOBODY where they published none), its partner
@@ -160,8 +159,7 @@ def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: I
 
 def _best(me: int, x: float, y: float, t: float, slot: int, asked: bool, nbr_id: IntSeq,
           nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_slot: IntSeq, nbr_partner: IntSeq,
-          nbr_other: IntSeq, offsets: np.ndarray,
-          motion: np.ndarray, least: float) -> int:
+          nbr_other: IntSeq, offsets: np.ndarray, motion: np.ndarray, least: float) -> int:
     """The neighbour (its index; -1: none) with the largest gain above ``least`` [m^2] of
     those that ask robot ``me`` for its place ``slot`` (``asked``), or else of the free
     ones of higher id."""

@@ -402,7 +402,7 @@ class Agent:
             [m.other for m in msgs],
             NOBODY if pal is None else pal.msg.slot, NOBODY if pal is None else pal.msg.partner,
             math.inf if pal is None else now_w - pal.msg.stamp,
-            [float(m.slot) for m in known], *places, gain_min,
+            [m.slot for m in known], *places, gain_min,
             2.0 * self.s.timeouts.staleness)
         if self.exchange.slot != was.slot:
             self.counters.place_changes += 1
