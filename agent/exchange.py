@@ -28,7 +28,7 @@ has heard (docs/controller.md, A18):
 
 An asker gives up when j is busy with another robot or has not given within ``hold``; it
 then waits ``hold`` before asking again, so that a late give mostly still finds it in its
-place. ``hold`` is two staleness limits.
+place. ``hold`` is :data:`HOLD` staleness limits.
 
 Plain floats and ints, and lists or arrays: agents run it interpreted on lists, the batch
 simulator compiled on arrays (:mod:`firmware_sim.compiled`).
@@ -54,6 +54,7 @@ if TYPE_CHECKING:
     IntSeq: TypeAlias = Sequence[int] | npt.NDArray[np.int64]
 
 NOBODY = -1     # no partner, no place
+HOLD = 2.0      # the handshake's hold [s], in staleness limits (module docstring)
 
 
 class Exchange(NamedTuple):
@@ -106,15 +107,16 @@ def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: I
                   nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_slot: IntSeq, nbr_partner: IntSeq,
                   nbr_other: IntSeq, pal_slot: int, pal_partner: int, pal_age: float,
                   known_slot: FloatSeq, offsets: np.ndarray, motion: np.ndarray,
-                  gain_min: float, hold: float) -> Exchange:
+                  gain_min: float, staleness: float) -> Exchange:
     """Robot ``me`` (at x, y [m], believed) one period on, at time t [s]: its exchange
     state after hearing its fresh neighbours in range (ids, positions [m], and the slot,
     partner and other they last published; NOBODY where they published none), its partner
     (the slot and partner it last published, and that state's age [s]; NOBODY and inf
     when it has none or never heard it), whatever its range, and what every robot last
     published (:func:`free_place`). ``offsets`` (S, 2) [m] and ``motion`` give the places
-    (:func:`place`)."""
+    (:func:`place`); ``staleness`` [s] the neighbour data's staleness limit."""
     m = len(nbr_id)
+    hold = HOLD * staleness
     if ex.giving:
         if pal_slot == ex.other:                                 # taken
             return Exchange(ex.slot, NOBODY, NOBODY, False, t)

@@ -402,8 +402,7 @@ class Agent:
             [m.other for m in msgs],
             NOBODY if pal is None else pal.msg.slot, NOBODY if pal is None else pal.msg.partner,
             math.inf if pal is None else now_w - pal.msg.stamp,
-            [m.slot for m in known], *places, gain_min,
-            2.0 * self.s.timeouts.staleness)
+            [m.slot for m in known], *places, gain_min, self.s.timeouts.staleness)
         if self.exchange.slot != was.slot:
             self.counters.place_changes += 1
             log.info("robot %d takes place %d (it had place %d)", self.s.robot_id,

@@ -131,12 +131,9 @@ class RunMetrics:
         if changed == 0 and not self.shared_places:
             return      # none changed: none shared now (a death only ends a sharing)
         live = slots[alive]
-        if len(np.unique(live)) == len(live):
-            self.shared_places = []
-        else:
-            _, first, count = np.unique(live, return_index=True, return_counts=True)
-            shared = np.isin(live, live[first[count > 1]])
-            self.shared_places = [int(r) for r in self.ids[alive][shared]]
+        _, first, count = np.unique(live, return_index=True, return_counts=True)
+        shared = np.isin(live, live[first[count > 1]])
+        self.shared_places = [int(r) for r in self.ids[alive][shared]]
 
     def observe_governor(self, limit: np.ndarray, alive: np.ndarray) -> None:
         """A period's governor limits [m/s] per robot (inf where it left the command alone)

@@ -353,7 +353,7 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
                 pal_age = t - view[pal, 5]
             ex = exchange_step(i, x, y, t, ex, nbr_j[:m], nbr_x[:m], nbr_y[:m], nbr_s[:m],
                                nbr_p[:m], nbr_o[:m], pal_slot, pal_partner, pal_age,
-                               view[:, 6], offsets, motion, p.exchange, 2.0 * staleness)
+                               view[:, 6], offsets, motion, p.exchange, staleness)
             if ex.slot != was:      # the error's finite difference sees no jump
                 ox, oy = place(offsets, motion, was, t)
                 nx, ny = place(offsets, motion, ex.slot, t)

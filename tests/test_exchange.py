@@ -4,11 +4,13 @@ import math
 import numpy as np
 import pytest
 
+from agent.exchange import HOLD as HOLD_LIMITS
 from agent.exchange import NOBODY, Exchange, exchange_gain, exchange_step
 
 OFFSETS = np.array([[4.0, 0.0], [-4.0, 0.0], [0.0, 8.0]])    # places 0, 1, 2 [m]
 MOTION = np.zeros(5)                                          # the places stand still
-HOLD = 1.0                                                    # s
+STALENESS = 0.5                                               # s
+HOLD = HOLD_LIMITS * STALENESS                                # s, the handshake's hold
 
 
 def step(me, xy, ex, nbrs, t=10.0, gain_min=1.0, motion=MOTION):
@@ -22,7 +24,7 @@ def step(me, xy, ex, nbrs, t=10.0, gain_min=1.0, motion=MOTION):
                                                                              math.inf)
     return exchange_step(me, xy[0], xy[1], t, ex, ints[:, 0], rows[:, 1], rows[:, 2],
                          ints[:, 1], ints[:, 2], ints[:, 3], pal_slot, pal_partner, pal_age,
-                         rows[:, 3], OFFSETS, motion, gain_min, HOLD)
+                         rows[:, 3], OFFSETS, motion, gain_min, STALENESS)
 
 
 def test_the_gain_is_the_fall_of_the_squared_distances():
@@ -125,7 +127,7 @@ def test_the_partners_newest_state_counts_out_of_range():
     asking = Exchange(0, 1, 1, False, 9.8)
     ex = exchange_step(0, -4.0, 0.0, 10.0, asking, np.zeros(0, int), np.zeros(0), np.zeros(0),
                        np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), 0, 0, 0.6,
-                       np.zeros(0), OFFSETS, MOTION, 1.0, HOLD)
+                       np.zeros(0), OFFSETS, MOTION, 1.0, STALENESS)
     assert ex == Exchange(1, NOBODY, NOBODY, False, 10.0)
 
 
