@@ -13,12 +13,12 @@ obstacle acts through a virtual agent at the robot's projection on its boundary.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 from agent.kinematics import wrap_angle
 
 if TYPE_CHECKING:
-    from typing import Sequence, TypeAlias
+    from typing import MutableSequence, Sequence, TypeAlias
 
     import numpy as np
     import numpy.typing as npt
@@ -29,9 +29,29 @@ if TYPE_CHECKING:
     FloatSeq: TypeAlias = Sequence[float] | npt.NDArray[np.float64]
     # Rows of floats: a sequence of lists in an agent, a 2-D float64 array compiled.
     FloatRows: TypeAlias = Sequence[FloatSeq] | npt.NDArray[np.float64]
+    # Ints: a list in an agent, an array compiled.
+    IntSeq: TypeAlias = Sequence[int] | npt.NDArray[np.int64]
+    # Columns a function writes into: lists in an agent, arrays compiled.
+    FloatBuf: TypeAlias = MutableSequence[float] | npt.NDArray[np.float64]
+    IntBuf: TypeAlias = MutableSequence[int] | npt.NDArray[np.int64]
 
 EPS = 1e-9
 HALF_PI = math.pi / 2
+
+
+class Surroundings(NamedTuple):
+    """What the law takes into account round the robot: the first ``n_nbr`` entries of the
+    neighbour columns and the first ``n_obs`` of the obstacle columns."""
+
+    nbr_x: FloatSeq     # m, the neighbours in range, where they are now
+    nbr_y: FloatSeq
+    nbr_held: FloatSeq  # 1.0 where the pair with it was active last period, else 0.0
+    nbr_grow: FloatSeq  # m, how much wider than a its governor's disc is (A13)
+    n_nbr: int
+    obs_x: FloatSeq     # m, the obstacles in range (detected, and silent neighbours)
+    obs_y: FloatSeq
+    obs_r: FloatSeq     # m, their radii
+    n_obs: int
 
 
 def segment_distance(sx: float, sy: float, px: float, py: float) -> float:
@@ -59,8 +79,8 @@ def clearance(x: float, y: float, cx: float, cy: float, r: float) -> float:
     return math.sqrt(dx * dx + dy * dy) - r
 
 
-def corner_takeover(followed: int, side: int, x: float, y: float, obs_x: FloatSeq,
-                    obs_y: FloatSeq, obs_r: FloatSeq, b: float, c: float) -> int:
+def corner_takeover(followed: int, side: int, x: float, y: float, around: Surroundings,
+                    b: float, c: float) -> int:
     """Index of the obstacle to follow after the corner rule, for a robot at (x, y).
 
     While circling obstacle F on side s (heading phi_F + s pi/2, phi the direction robot ->
@@ -69,10 +89,11 @@ def corner_takeover(followed: int, side: int, x: float, y: float, obs_x: FloatSe
     from the obstacles.
     """
     s = float(side)
+    obs_x, obs_y, obs_r = around.obs_x, around.obs_y, around.obs_r
     fx, fy, fr = obs_x[followed], obs_y[followed], obs_r[followed]
     theta_f = math.atan2(fy - y, fx - x) + side * HALF_PI
     best, best_turn = 0, -math.inf
-    for k in range(len(obs_r)):
+    for k in range(around.n_obs):
         phi = math.atan2(obs_y[k] - y, obs_x[k] - x)
         clear = clearance(x, y, obs_x[k], obs_y[k], obs_r[k])
         gap = clearance(fx, fy, obs_x[k], obs_y[k], obs_r[k]) - fr     # between surfaces
@@ -84,15 +105,16 @@ def corner_takeover(followed: int, side: int, x: float, y: float, obs_x: FloatSe
     return best if best_turn > 0.0 else followed
 
 
-def way_closed(followed: int, side: int, x: float, y: float, obs_x: FloatSeq,
-               obs_y: FloatSeq, obs_r: FloatSeq, b: float, c: float) -> bool:
+def way_closed(followed: int, side: int, x: float, y: float, around: Surroundings,
+               b: float, c: float) -> bool:
     """Whether the way round obstacle F on side s is closed ahead of a robot at (x, y): an
     obstacle on the other side of its heading (phi_F + s pi/2), ahead of it and within c,
     leaves less than 2b between itself and F, too narrow to pass outside AVOID."""
     s = float(side)
+    obs_x, obs_y, obs_r = around.obs_x, around.obs_y, around.obs_r
     fx, fy, fr = obs_x[followed], obs_y[followed], obs_r[followed]
     theta_f = math.atan2(fy - y, fx - x) + side * HALF_PI
-    for k in range(len(obs_r)):
+    for k in range(around.n_obs):
         if k == followed or clearance(x, y, obs_x[k], obs_y[k], obs_r[k]) >= c:
             continue
         off = wrap_angle(math.atan2(obs_y[k] - y, obs_x[k] - x) - theta_f)

@@ -31,7 +31,8 @@ then waits ``hold`` before asking again, so that a late give mostly still finds 
 place. ``hold`` is :data:`HOLD` staleness limits.
 
 Plain floats and ints, and lists or arrays: agents run it interpreted on lists, the batch
-simulator compiled on arrays (:mod:`firmware_sim.compiled`).
+simulator compiled on arrays (:mod:`firmware_sim.compiled`), within one robot's period
+(:mod:`agent.period`).
 """
 from __future__ import annotations
 
@@ -40,18 +41,12 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from agent.formation import reference_point
+from agent.formation import place
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
-    from typing import TypeAlias
-
-    import numpy.typing as npt
-
-    from agent.avoidance import FloatSeq
-
-    # Ints: a list in an agent, an array compiled.
-    IntSeq: TypeAlias = Sequence[int] | npt.NDArray[np.int64]
+    from agent.avoidance import FloatSeq, IntSeq
+    from agent.formation import Places
+    from agent.neighbours import Reports
 
 NOBODY = -1     # no partner, no place
 HOLD = 2.0      # the handshake's hold [s], in staleness limits (module docstring)
@@ -67,13 +62,17 @@ class Exchange(NamedTuple):
     since: float = -math.inf    # s, when it last asked, took, gave or gave up
 
 
-def place(offsets: np.ndarray, motion: np.ndarray, slot: int, t: float
-          ) -> tuple[float, float]:
-    """Where place ``slot`` is at time t [s]: x, y [m] (``motion``: centre0 x, y [m],
-    velocity x, y [m/s], omega [rad/s])."""
-    x, y, _, _ = reference_point(offsets[slot, 0], offsets[slot, 1], motion[0], motion[1],
-                                 motion[2], motion[3], motion[4], t)
-    return x, y
+class Heard(NamedTuple):
+    """What a robot has heard, for its exchange step: every robot's newest report, and
+    which of them are fresh neighbours in range, where those are now."""
+
+    reports: Reports        # every robot's newest report (its own row is passed over)
+    rows: IntSeq            # the fresh neighbours in range: their rows of ``reports``
+    x: FloatSeq             # m, where each of those is now
+    y: FloatSeq             # m
+    n: int                  # how many there are
+    partner: int            # the row of its partner's newest report (-1: none heard)
+    partner_age: float      # s, that report's age (inf: none)
 
 
 def exchange_gain(x_i: float, y_i: float, gx_i: float, gy_i: float, x_j: float, y_j: float,
@@ -83,40 +82,40 @@ def exchange_gain(x_i: float, y_i: float, gx_i: float, gy_i: float, x_j: float, 
     return 2.0 * ((x_j - x_i) * (gx_i - gx_j) + (y_j - y_i) * (gy_i - gy_j))
 
 
-def free_place(x: float, y: float, t: float, slot: int, known_slot: FloatSeq,
-               offsets: np.ndarray, motion: np.ndarray) -> int:
-    """The place nearest to (x, y) [m] at time t [s] that no robot holds, as far as this
-    robot knows: ``known_slot`` the slot every robot last published (any age; NOBODY:
-    none), ``slot`` counted as held. NOBODY when every place is held."""
-    held = np.zeros(len(offsets), np.bool_)
+def free_place(me: int, x: float, y: float, t: float, slot: int, reports: Reports,
+               places: Places) -> int:
+    """The place nearest to (x, y) [m] at time t [s] that no robot holds, as far as robot
+    ``me`` knows: the slot every other robot last published (any age; NOBODY: none), and
+    its own ``slot`` counted as held. NOBODY when every place is held."""
+    held = np.zeros(len(places.offsets), np.bool_)
     held[slot] = True
-    for r in range(len(known_slot)):
-        if known_slot[r] >= 0:
-            held[int(known_slot[r])] = True
+    for r in range(len(reports.robot)):
+        if (reports.robot[r] != me and reports.stamp[r] > -math.inf
+                and reports.slot[r] >= 0):
+            held[reports.slot[r]] = True
     best, pick = math.inf, NOBODY
-    for s in range(len(offsets)):
+    for s in range(len(places.offsets)):
         if not held[s]:
-            px, py = place(offsets, motion, s, t)
+            px, py = place(places, s, t)
             d = (px - x) * (px - x) + (py - y) * (py - y)
             if d < best:
                 best, pick = d, s
     return pick
 
 
-def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: IntSeq,
-                  nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_slot: IntSeq, nbr_partner: IntSeq,
-                  nbr_other: IntSeq, pal_slot: int, pal_partner: int, pal_age: float,
-                  known_slot: FloatSeq, offsets: np.ndarray, motion: np.ndarray,
-                  gain_min: float, staleness: float) -> Exchange:
+def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, heard: Heard,
+                  places: Places, gain_min: float, staleness: float) -> Exchange:
     """Robot ``me`` (at x, y [m], believed) one period on, at time t [s]: its exchange
-    state after hearing its fresh neighbours in range (ids, positions [m], and the slot,
-    partner and other they last published; NOBODY where they published none), its partner
-    (the slot and partner it last published, and that state's age [s]; NOBODY and inf
-    when it has none or never heard it), whatever its range, and what every robot last
-    published (:func:`free_place`). ``offsets`` (S, 2) [m] and ``motion`` give the places
-    (:func:`place`); ``staleness`` [s] the neighbour data's staleness limit."""
-    m = len(nbr_id)
+    state after hearing ``heard`` (the slot, partner and other its fresh neighbours in
+    range last published, NOBODY where they published none; its partner's newest report,
+    whatever its range; what every robot last published, :func:`free_place`). ``places``
+    (agent.formation.place); ``staleness`` [s] the neighbour data's staleness limit."""
     hold = HOLD * staleness
+    rep = heard.reports
+    pal_slot, pal_partner = NOBODY, NOBODY
+    if heard.partner >= 0:
+        pal_slot, pal_partner = rep.slot[heard.partner], rep.partner[heard.partner]
+    pal_age = heard.partner_age
     if ex.giving:
         if pal_slot == ex.other:                                 # taken
             return Exchange(ex.slot, NOBODY, NOBODY, False, t)
@@ -129,9 +128,10 @@ def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: I
         return ex
     if ex.partner != NOBODY and pal_slot == ex.slot:      # the robot asked gave its place
         return Exchange(ex.other, NOBODY, NOBODY, False, t)
-    for q in range(m):       # one that names this robot from its place: it gave, late
-        if nbr_slot[q] == ex.slot and nbr_partner[q] == me and nbr_other[q] != NOBODY:
-            return Exchange(nbr_other[q], NOBODY, NOBODY, False, t)
+    for q in range(heard.n):  # one that names this robot from its place: it gave, late
+        r = heard.rows[q]
+        if rep.slot[r] == ex.slot and rep.partner[r] == me and rep.other[r] != NOBODY:
+            return Exchange(rep.other[r], NOBODY, NOBODY, False, t)
     if ex.partner != NOBODY:
         busy = pal_partner != NOBODY and pal_partner != me
         if busy or t - ex.since > hold:
@@ -139,42 +139,44 @@ def exchange_step(me: int, x: float, y: float, t: float, ex: Exchange, nbr_id: I
         return ex
     # a place two robots hold (an exchange left half done): the one of higher id leaves
     # it for the nearest free one
-    for q in range(m):
-        if nbr_slot[q] == ex.slot and nbr_id[q] < me:
-            free = free_place(x, y, t, ex.slot, known_slot, offsets, motion)
+    for q in range(heard.n):
+        r = heard.rows[q]
+        if rep.slot[r] == ex.slot and rep.robot[r] < me:
+            free = free_place(me, x, y, t, ex.slot, rep, places)
             if free != NOBODY:
                 return Exchange(free, NOBODY, NOBODY, False, t)
     if t - ex.since < hold or gain_min <= 0.0:
         return ex
     # asked for this robot's place: give it to the asker that gains most; else ask the
     # free neighbour of higher id that gains most
-    q = _best(me, x, y, t, ex.slot, True, nbr_id, nbr_x, nbr_y, nbr_slot, nbr_partner,
-              nbr_other, offsets, motion, 0.0)
+    q = _best(me, x, y, t, ex.slot, True, heard, places, 0.0)
     if q >= 0:
-        return Exchange(nbr_slot[q], nbr_id[q], ex.slot, True, t)
-    q = _best(me, x, y, t, ex.slot, False, nbr_id, nbr_x, nbr_y, nbr_slot, nbr_partner,
-              nbr_other, offsets, motion, gain_min)
+        r = heard.rows[q]
+        return Exchange(rep.slot[r], rep.robot[r], ex.slot, True, t)
+    q = _best(me, x, y, t, ex.slot, False, heard, places, gain_min)
     if q >= 0:
-        return Exchange(ex.slot, nbr_id[q], nbr_slot[q], False, t)
+        r = heard.rows[q]
+        return Exchange(ex.slot, rep.robot[r], rep.slot[r], False, t)
     return ex
 
 
-def _best(me: int, x: float, y: float, t: float, slot: int, asked: bool, nbr_id: IntSeq,
-          nbr_x: FloatSeq, nbr_y: FloatSeq, nbr_slot: IntSeq, nbr_partner: IntSeq,
-          nbr_other: IntSeq, offsets: np.ndarray, motion: np.ndarray, least: float) -> int:
-    """The neighbour (its index; -1: none) with the largest gain above ``least`` [m^2] of
-    those that ask robot ``me`` for its place ``slot`` (``asked``), or else of the free
-    ones of higher id."""
-    gx, gy = place(offsets, motion, slot, t)
+def _best(me: int, x: float, y: float, t: float, slot: int, asked: bool, heard: Heard,
+          places: Places, least: float) -> int:
+    """The neighbour (its index in ``heard``; -1: none) with the largest gain above
+    ``least`` [m^2] of those that ask robot ``me`` for its place ``slot`` (``asked``), or
+    else of the free ones of higher id."""
+    rep = heard.reports
+    gx, gy = place(places, slot, t)
     best, pick = least, -1
-    for q in range(len(nbr_id)):
+    for q in range(heard.n):
+        r = heard.rows[q]
         if asked:
-            candidate = nbr_partner[q] == me and nbr_other[q] == slot
+            candidate = rep.partner[r] == me and rep.other[r] == slot
         else:
-            candidate = nbr_id[q] > me and nbr_partner[q] == NOBODY
-        if candidate and nbr_slot[q] != NOBODY and nbr_slot[q] != slot:
-            ox, oy = place(offsets, motion, nbr_slot[q], t)
-            gain = exchange_gain(x, y, gx, gy, nbr_x[q], nbr_y[q], ox, oy)
+            candidate = rep.robot[r] > me and rep.partner[r] == NOBODY
+        if candidate and rep.slot[r] != NOBODY and rep.slot[r] != slot:
+            ox, oy = place(places, rep.slot[r], t)
+            gain = exchange_gain(x, y, gx, gy, heard.x[q], heard.y[q], ox, oy)
             if gain > best:
                 best, pick = gain, q
     return pick

@@ -10,8 +10,12 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from agent.avoidance import FloatRows, FloatSeq
 
 
 class FormationKind(str, enum.Enum):
@@ -64,6 +68,26 @@ def reference_point(offset_x: float, offset_y: float, center_x: float, center_y:
     # d/dt Rot(wt) off = w J Rot(wt) off, J = [[0,-1],[1,0]]
     return (center_x + vel_x * t + rx, center_y + vel_y * t + ry,
             vel_x - omega * ry, vel_y + omega * rx)
+
+
+class Places(NamedTuple):
+    """The mission's places as one robot's period reads them."""
+
+    offsets: FloatRows  # (S, 2) m, formation frame
+    motion: FloatSeq    # centre0 x, y [m], velocity x, y [m/s], omega [rad/s]
+
+
+def reference(places: Places, slot: int, t: float) -> tuple[float, float, float, float]:
+    """:func:`reference_point` of place ``slot`` at time t [s]."""
+    m = places.motion
+    return reference_point(places.offsets[slot][0], places.offsets[slot][1], m[0], m[1],
+                           m[2], m[3], m[4], t)
+
+
+def place(places: Places, slot: int, t: float) -> tuple[float, float]:
+    """Where place ``slot`` is at time t [s]: x, y [m]."""
+    x, y, _, _ = reference(places, slot, t)
+    return x, y
 
 
 @dataclass(frozen=True)

@@ -4,16 +4,15 @@ Theory of operation. Every tick the agent
 
 1. reads: drains the wheel drivers' feedback (odometry from the encoder positions), takes
    an immutable snapshot of its neighbours' states, its obstacle detections and the mission;
-2. updates: decides its mode and runs the one pure law for itself (agent.law) with its
-   neighbours extrapolated to now (stale ones kept as static obstacles at their last
-   position);
-3. writes: the wheel velocities (curvature-preserving saturation) and its own state.
+2. updates: decides its mode and, in FORMATION, runs its period (agent.period.robot_period:
+   the one period the batch simulator runs for every robot) on what it read;
+3. writes: the wheel set-points and its own state.
 
 Modes: DISARMED (drivers IDLE, nothing commanded), HOLD (zero velocity, watchdog fed) and
-FORMATION (the law). Bounds in layers, nearest the actuator last: law (|u| clip) -> wheel
-saturation -> non-finite guard -> stale feedback or driver error means failsafe HOLD ->
-disarmed means no command at all. A failsafe is sticky: it takes a new FORMATION request
-(ground station) to leave it.
+FORMATION (the period). Bounds in layers, nearest the actuator last: the law (|u| clip, the
+safety governor, the wheels' limit and ramp) -> non-finite guard -> stale feedback or
+driver error means failsafe HOLD -> disarmed means no command at all. A failsafe is
+sticky: it takes a new FORMATION request (ground station) to leave it.
 """
 from __future__ import annotations
 
@@ -26,36 +25,20 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
-from agent.config import CONTROL_PARAMS, commitment, disc_args
-from agent.exchange import NOBODY, Exchange, exchange_step, place
-from agent.formation import reference_point
-from agent.governor import (
-    NO_GAPS,
-    SPLITS,
-    binding,
-    fold_hazard,
-    frame_limits,
-    neighbour_floor,
-    neighbour_radii,
-    silent_radius,
-)
-from agent.kinematics import TWO_PI, body_velocity, wheel_command
-from agent.law import (
-    LawMemory,
-    LawParams,
-    governor_frame,
-    last_velocity,
-    law_step,
-    may_pass,
-    moved_estimate,
-    pair_active,
-)
+from agent.config import CONTROL_PARAMS
+from agent.exchange import NOBODY, Exchange
+from agent.formation import Places
+from agent.kinematics import TWO_PI, body_velocity
+from agent.law import LawMemory
 from agent.loop import Clock
-from agent.neighbours import InRange, in_range
+from agent.neighbours import Reports
 from agent.odometry import Odometry, Pose
+from agent.params import PeriodParams
+from agent.period import Detections, Inputs, Memory, Own, PeriodOut, Workspace, robot_period
+from agent.period_log import PeriodLog
 from agent.pose import PoseFusion
 from agent.progress import PROGRESS, ProgressWatch, tolerance
-from agent.trail import Trail
+from agent.trail import SPLITS, Splits, Trail
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg
 from common.ports import FixPort, MotorPort, SwarmPort
 from common.schema import ConfigError, Param
@@ -135,8 +118,9 @@ class Agent:
     """The agent of robot ``settings.robot_id`` over its injected ports."""
 
     def __init__(self, settings: AgentSettings, motor: MotorPort, swarm: SwarmPort,
-                 clock: Clock, fixes: FixPort | None = None):
-        """``fixes``: the robot's pose fixes, required when ``settings.pose`` is set."""
+                 clock: Clock, fixes: FixPort | None = None, periods: PeriodLog | None = None):
+        """``fixes``: the robot's pose fixes, required when ``settings.pose`` is set;
+        ``periods``: where to record every period it runs (None: nowhere)."""
         self.s = settings
         self._derive()
         self.motor, self.swarm, self.clock = motor, swarm, clock
@@ -153,7 +137,12 @@ class Agent:
         self.pose: Pose = self.odometry.pose   # the estimate the agent acts on
         self.trail = Trail(settings.timeouts.staleness)   # its path, for the governor
         self.memory = LawMemory()
-        self._held: set[int] = set()       # neighbours whose pair was active (law.pair_active)
+        self._held: list[int] = []         # neighbours whose pair was active (law.pair_active)
+        self._jump = (0.0, 0.0)            # m, what pose fixes moved the estimate since the
+                                           # last period
+        self._ws = _workspace(0)
+        self.periods = periods
+        self._period: tuple[Inputs, Memory, PeriodOut] | None = None   # to record
         self.progress = ProgressWatch(settings.timeouts.deadlock)
         self.deadlock: str | None = None   # why the robot is deadlocked, if it is
         self.counters = AgentCounters()
@@ -166,8 +155,7 @@ class Agent:
         self._seq = 0
         self._last_law: float | None = None     # monotonic time of the last law step
         self._mission_key: tuple | None = None
-        self._places: tuple[np.ndarray, np.ndarray] | None = None  # the mission's offsets
-                                                                   # and motion (exchange)
+        self._places: Places | None = None   # the mission's places
         self.exchange = Exchange(NOBODY)   # its place in the mission (agent.exchange)
         self._armed_at = -math.inf         # monotonic time of the last arm request
         self._arming = False               # waiting for both drivers to enter closed loop
@@ -218,14 +206,11 @@ class Agent:
         return float(getattr(self.s.control, _PARAMS[name].field))
 
     def _derive(self) -> None:
-        """What the law and the governor's neighbour model read from the settings, derived
-        at start and again when a parameter changes (:meth:`set_param`): the law's view,
-        and the constants of a neighbour's disc (agent.config.disc_args, commitment; the
-        swarm's robots are alike)."""
+        """What the period reads of the settings (agent.params.PeriodParams), derived at
+        start and again when a parameter changes (:meth:`set_param`)."""
         s = self.s
-        self._law_params = LawParams.of(s.control, s.robot)
-        self._disc = disc_args(s.control, s.robot, s.timeouts.staleness)
-        self._commit = commitment(s.control, s.robot)
+        self._params = PeriodParams.of(s.control, s.robot, s.sensing_range,
+                                       s.timeouts.staleness, s.robot.watchdog_timeout)
 
     def set_param(self, name: str, value: float) -> str | None:
         """Set runtime parameter ``name``; validated by the settings schema, in force from
@@ -264,28 +249,25 @@ class Agent:
         detections = self.swarm.obstacles()
 
         # update
-        v = u = 0.0
+        right = left = 0.0
         self.law_mode = Mode.TRACK
         self.governed = False
         if self.mode is not AgentMode.DISARMED:
             self._check_feedback(fb, now_m)
             self._check_fix()
             if self.mode is AgentMode.FORMATION and self.failsafe is None and not self._arming:
-                v, u = self._formation_step(pose, mission, neighbours, detections, now_m,
-                                            now_w)
+                right, left = self._formation_step(pose, mission, neighbours, detections,
+                                                   now_m, now_w)
             else:
                 self._watch_progress(None)
         else:
             self._last_law = None
             self._watch_progress(None)
 
-        # write (the law's command is within the wheels' limit and ramp already: wheel_command
-        # only converts it; a HOLD's zero is ramped by the drivers)
-        right = left = 0.0
+        # write (the period's set-points are within the wheels' limit and ramp already; a
+        # HOLD's zero is ramped by the drivers)
         if self.mode is not AgentMode.DISARMED:
             r = self.s.robot
-            right, left = wheel_command(v, u, r.wheel_radius, r.wheel_base,
-                                        r.wheel_speed_limit)
             if not (math.isfinite(right) and math.isfinite(left)):
                 self.counters.nonfinite_commands += 1
                 right = left = 0.0
@@ -294,8 +276,13 @@ class Agent:
                                          r.wheel_base)
             self.command = (v_sat, u_sat)
         else:
+            right = left = 0.0
             self.command = (0.0, 0.0)
         self.memory = self.memory._replace(wheel_r=right, wheel_l=left)   # the law ramps on
+        if self._period is not None and self.periods is not None:
+            inputs, before, out = self._period
+            self.periods.write(inputs, before, self._params, out, self._held, (right, left))
+            self._period = None
         self._publish(pose, now_w)
 
     def _check_feedback(self, fb: WheelFeedback | None, now_m: float) -> None:
@@ -344,8 +331,8 @@ class Agent:
         before = self.fusion.update(now_w, self.odometry.pose)
         if (fix := self.fixes.fix()) is not None and self.fusion.fix(fix):
             after = self.fusion.pose
-            self.memory = moved_estimate(self.memory, after[0] - before[0],
-                                         after[1] - before[1])
+            self._jump = (self._jump[0] + (after[0] - before[0]),
+                          self._jump[1] + (after[1] - before[1]))
         self.pose = self.fusion.pose
         return self.pose
 
@@ -365,9 +352,9 @@ class Agent:
         if reason:
             self._enter_failsafe(reason)
 
-    def _mission_places(self, mission: MissionMsg) -> tuple[np.ndarray, np.ndarray] | None:
-        """The mission's places (offsets (S, 2) [m], motion: centre0, velocity, omega), None
-        when this robot is not in it; a new mission gives the robot its own place again."""
+    def _mission_places(self, mission: MissionMsg) -> Places | None:
+        """The mission's places, None when this robot is not in it; a new mission gives
+        the robot its own place again."""
         key = (mission.seq, mission.stamp)
         if key != self._mission_key:
             self._mission_key = key
@@ -376,45 +363,18 @@ class Agent:
                 log.error("robot %d is not in the mission's formation", self.s.robot_id)
                 self._places, self.exchange = None, Exchange(NOBODY)
             else:
-                self._places = (np.ascontiguousarray(mission.offsets, dtype=float),
-                                np.array([*mission.center0, *mission.velocity,
-                                          mission.omega], dtype=float))
+                self._places = Places(np.ascontiguousarray(mission.offsets, dtype=float),
+                                      np.array([*mission.center0, *mission.velocity,
+                                                mission.omega], dtype=float))
                 self.exchange = Exchange(int(where[0]))
         return self._places
-
-    def _exchange_places(self, pose: tuple[float, float, float], near: InRange,
-                         neighbours: Mapping[int, Received[StateMsg]],
-                         places: tuple[np.ndarray, np.ndarray], t: float, now_w: float
-                         ) -> None:
-        """One step of the place exchange (agent.exchange) with the fresh neighbours in
-        range, at mission time t [s] (UNIX time now_w [s]); a changed place moves the law's
-        remembered error."""
-        gain_min = self._law_params.exchange
-        if gain_min <= 0.0:
-            return
-        msgs = [neighbours[rid].msg for rid in near.fresh_id]
-        known = [r.msg for rid, r in neighbours.items() if rid != self.s.robot_id]
-        was = self.exchange
-        pal = neighbours.get(was.partner) if was.partner != NOBODY else None
-        self.exchange = exchange_step(
-            self.s.robot_id, pose[0], pose[1], t, was, near.fresh_id, near.fresh_x,
-            near.fresh_y, [m.slot for m in msgs], [m.partner for m in msgs],
-            [m.other for m in msgs],
-            NOBODY if pal is None else pal.msg.slot, NOBODY if pal is None else pal.msg.partner,
-            math.inf if pal is None else now_w - pal.msg.stamp,
-            [m.slot for m in known], *places, gain_min, self.s.timeouts.staleness)
-        if self.exchange.slot != was.slot:
-            self.counters.place_changes += 1
-            log.info("robot %d takes place %d (it had place %d)", self.s.robot_id,
-                     self.exchange.slot, was.slot)
-            ox, oy = place(*places, was.slot, t)
-            nx, ny = place(*places, self.exchange.slot, t)
-            self.memory = moved_estimate(self.memory, ox - nx, oy - ny)
 
     def _formation_step(self, pose: tuple[float, float, float], mission: MissionMsg | None,
                         neighbours: Mapping[int, Received[StateMsg]],
                         detections: ObstaclesMsg | None, now_m: float, now_w: float
                         ) -> tuple[float, float]:
+        """The period (agent.period.robot_period) on what the agent read; the wheels'
+        set-points [rev/s]."""
         if mission is None or now_w < mission.epoch:
             self._last_law = None
             self._watch_progress(None)
@@ -423,45 +383,65 @@ class Agent:
         if places is None:
             self._watch_progress(None)
             return 0.0, 0.0
-        t = now_w - mission.epoch
-        near, obs_x, obs_y, obs_r = self._surroundings(pose, neighbours, detections, now_w)
-        self._exchange_places(pose, near, neighbours, places, t, now_w)
-        offsets, motion = places
-        slot = self.exchange.slot
-        rx, ry, rvx, rvy = reference_point(offsets[slot, 0], offsets[slot, 1], motion[0],
-                                           motion[1], motion[2], motion[3], motion[4], t)
-        self.reference = (rx, ry)
         dt = self.s.control.period if self._last_law is None else now_m - self._last_law
         dt = max(dt, 1e-6)
         self._last_law = now_m
-        halves: dict[int, float] = {}
-        limits = (self._limits(pose, neighbours, near, obs_x, obs_y, obs_r, now_w, dt, halves)
-                  if self.s.control.governor else NO_GAPS)
-        a = self.s.control.a
-        grow = [halves.get(rid, a) - a for rid in near.fresh_id]
-        per_pair = self._law_params.pair_hysteresis
-        held = [1.0 if rid in self._held else 0.0 for rid in near.fresh_id] if per_pair \
-            else [0.0] * len(near.fresh_x)
-        v, u, mode, governed, self.memory = law_step(
-            *pose, rx, ry, rvx, rvy, near.fresh_x, near.fresh_y, held, grow, obs_x, obs_y,
-            obs_r, limits, self.memory, self._law_params, dt)
-        if per_pair:       # the pairs' memory, as the law applied it
-            b, h = self.s.control.b, self.s.control.hysteresis
-            self._held = set()
-            for rid, nx, ny, was in zip(near.fresh_id, near.fresh_x, near.fresh_y, held):
-                dx, dy = nx - pose[0], ny - pose[1]
-                if pair_active(dx * dx + dy * dy, was > 0.5, b, h):
-                    self._held.add(rid)
-        self._watch_progress((now_m, math.hypot(pose[0] - rx, pose[1] - ry),
-                              tolerance(math.hypot(rvx, rvy), self.s.control.K)))
-        self.law_mode = Mode(mode)
+        recs = [r for rid, r in neighbours.items() if rid != self.s.robot_id]
+        inputs = self.inputs(pose, recs, detections, places, now_w, now_w - mission.epoch, dt)
+        if len(recs) + inputs.detections.n > len(self._ws.obs_x):
+            self._ws = _workspace(2 * (len(recs) + inputs.detections.n))
+        before = Memory(self.memory, self.exchange)
+        out = robot_period(inputs, before, self._params, self._ws)
+        if self.periods is not None:
+            self._period = (inputs, before, out)
+        self._jump = (0.0, 0.0)
+        was = self.exchange.slot
+        self.memory, self.exchange = out.memory
+        if self.exchange.slot != was:
+            self.counters.place_changes += 1
+            log.info("robot %d takes place %d (it had place %d)", self.s.robot_id,
+                     self.exchange.slot, was)
+        self._held = list(self._ws.held[:out.n_held])
+        ref = out.reference
+        self.reference = (ref.x, ref.y)
+        for q in range(out.n_nbr):        # the age of the data the law acted on
+            rec = recs[self._ws.nbr_row[q]]
+            self.counters.neighbour_age.append(now_w - rec.msg.stamp)
+            self.counters.age_stages.append(_stages(rec, now_w))
+        self._watch_progress((now_m, math.hypot(pose[0] - ref.x, pose[1] - ref.y),
+                              tolerance(math.hypot(ref.vx, ref.vy), self.s.control.K)))
+        self.law_mode = Mode(out.mode)
         self.counters.law_steps += 1
-        self.governed = math.isfinite(governed)
+        self.governed = math.isfinite(out.governed)
         if self.governed:
             self.counters.governed += 1
             self.counters.governor_min_allowed = min(self.counters.governor_min_allowed,
-                                                     governed)
-        return v, u
+                                                     out.governed)
+        return out.right, out.left
+
+    def inputs(self, pose: tuple[float, float, float], recs: list[Received[StateMsg]],
+               detections: ObstaclesMsg | None, places: Places, now_w: float, t: float,
+               dt: float) -> Inputs:
+        """What this robot knows in a period (agent.period.Inputs), at UNIX time ``now_w``
+        [s], mission time ``t`` [s], ``dt`` [s] after the last period: its pose, its
+        neighbours' newest states ``recs``, its ``detections`` (None: none), the mission's
+        ``places``, its path and the pairs it avoided."""
+        msgs = [r.msg for r in recs]
+        n = len(msgs)
+        reports = Reports([m.robot_id for m in msgs], [m.stamp for m in msgs],
+                          [m.x for m in msgs], [m.y for m in msgs], [m.theta for m in msgs],
+                          [m.v for m in msgs], [m.u for m in msgs], [m.slot for m in msgs],
+                          [m.partner for m in msgs], [m.other for m in msgs])
+        if detections is not None:
+            seen = Detections(detections.centers[:, 0].tolist(),
+                              detections.centers[:, 1].tolist(), detections.radii.tolist(),
+                              len(detections.radii))
+        else:
+            seen = Detections([], [], [], 0)
+        grow = self.fusion.uncertainty if self.fusion is not None else 0.0    # m
+        own = Own(self.s.robot_id, pose[0], pose[1], pose[2], grow, *self._jump)
+        return Inputs(own, now_w, t, dt, reports, list(range(n)), n, seen, places,
+                      self.trail.path(), self._held, len(self._held))
 
     def _watch_progress(self, sample: tuple[float, float, float] | None) -> None:
         """The deadlock detector (agent.progress) on (monotonic time [s], tracking error [m],
@@ -485,96 +465,6 @@ class Agent:
             if self.deadlock is not None:
                 log.info("robot %d progressing again", self.s.robot_id)
             self.deadlock = None
-
-    def _limits(self, pose: tuple[float, float, float],
-                neighbours: Mapping[int, Received[StateMsg]], near: InRange,
-                obs_x: list[float], obs_y: list[float], obs_r: list[float], now_w: float,
-                dt: float, halves: dict[int, float]) -> tuple[float, float, float]:
-        """The safety governor's (forward, backward) speed limits [m/s] and room [m] at
-        ``pose`` (agent.governor.frame_limits), ``dt`` [s] after the last law step, among
-        its hazards (agent.governor): the detected obstacles grown by a (``obs_*`` but for
-        the stale robots among ``near``'s, which are among the neighbours) and every
-        neighbour heard from where it can be by now given its data's age; with a pose
-        source, every radius also grown by this robot's position uncertainty.
-
-        The nearest first, by a cheap bound of the free distance toward each neighbour's
-        disc (agent.governor.neighbour_floor); a disc is computed only where that is below
-        the distance within which a disc can bind (agent.governor.binding) or where the
-        law can pass the neighbour (agent.law.may_pass): the limits are those of every
-        disc. ``halves`` gets the half radius [m] of each neighbour's claim, which the law
-        passes round (A13), by robot id; or, where it cannot pass the neighbour, a bound
-        of it."""
-        s = self.s
-        grow = self.fusion.uncertainty if self.fusion is not None else 0.0   # m
-        half_base, disc = self._disc
-        a, staleness = disc[0], s.timeouts.staleness
-        x, y, me = pose[0], pose[1], s.robot_id
-        frame = governor_frame(pose[2], *last_velocity(self.memory, self._law_params),
-                               self._law_params, dt)
-        gaps = NO_GAPS
-        for k in range(len(obs_r) - len(near.stale_x)):
-            gaps = fold_hazard(gaps, frame, obs_x[k] - x, obs_y[k] - y, obs_r[k] + a + grow,
-                               -math.inf, 0.0)
-        law_xy = {rid: (nx, ny) for rid, nx, ny in zip(near.fresh_id, near.fresh_x,
-                                                        near.fresh_y)}
-        reach = s.sensing_range + disc[2] * staleness
-        reach2 = reach * reach
-        speed_up, lag = self._commit[:2]
-        accel, top_speed, path_since = disc[1], disc[2], self.trail.path_since
-        ahead = []
-        for rid, rec in neighbours.items():
-            m = rec.msg
-            dx, dy = m.x - x, m.y - y
-            if rid == me or dx * dx + dy * dy > reach2:
-                continue
-            age = now_w - m.stamp
-            floor, top = neighbour_floor(-dx, -dy, m.v, age, path_since(m.stamp), a, accel,
-                                         top_speed, staleness, speed_up, lag)
-            ahead.append((floor - 0.5 * grow, rid, -dx, -dy, age, top + grow, m))
-        ahead.sort()                     # by the floor (then by id: the ids differ)
-        bind = binding(gaps, frame)
-        splits, rest = self.trail.splits, (*disc[2:], *self._commit)
-        for floor, rid, rel_x, rel_y, age, top, m in ahead:
-            if floor >= bind:            # it cannot bind: is it one the law may pass?
-                lx, ly = law_xy.get(rid, (math.inf, math.inf))
-                lx, ly = lx - x, ly - y
-                if not may_pass(math.sqrt(lx * lx + ly * ly), top - a, self._law_params):
-                    halves[rid] = top
-                    continue
-            # this robot's motion since the stamp, split as the governor takes it: only for
-            # the discs computed (neighbours stamped alike share it: Trail.splits)
-            moved = splits(m.stamp, age, SPLITS)
-            full, half, east, north, claim = neighbour_radii(
-                rel_x, rel_y, m.theta, m.v, m.u, age, moved, a, accel, half_base, *rest)
-            gaps = fold_hazard(gaps, frame, m.x + east - x, m.y + north - y, full + grow,
-                               half + grow, 1.0 if age <= staleness else 0.0)
-            bind = binding(gaps, frame)
-            halves[rid] = claim + grow
-        return frame_limits(gaps, frame)
-
-    def _surroundings(self, pose: tuple[float, float, float],
-                      neighbours: Mapping[int, Received[StateMsg]],
-                      obs: ObstaclesMsg | None, now_w: float
-                      ) -> tuple[InRange, list[float], list[float], list[float]]:
-        """Neighbours in range [m] (extrapolated to now) and obstacles' centres and radii
-        [m] (the detections ``obs``), stale robots included as static obstacles at their
-        last position (agent.governor.silent_radius)."""
-        me = self.s.robot_id
-        recs = [r for rid, r in neighbours.items() if rid != me]
-        near = in_range([r.msg for r in recs], pose[0], pose[1], now_w,
-                        self.s.timeouts.staleness, self.s.sensing_range)
-        self.counters.neighbour_age.extend(near.ages)
-        self.counters.age_stages.extend(_stages(recs[i], now_w) for i in near.fresh)
-        obs_x, obs_y, obs_r = ((obs.centers[:, 0].tolist(), obs.centers[:, 1].tolist(),
-                                obs.radii.tolist()) if obs is not None else ([], [], []))
-        obs_x += near.stale_x
-        obs_y += near.stale_y
-        if near.stale:
-            half_base, disc = self._disc
-            for i in near.stale:
-                m = recs[i].msg
-                obs_r.append(silent_radius(m.v, half_base * m.u, *disc, *self._commit))
-        return near, obs_x, obs_y, obs_r
 
     def flags(self) -> StateFlags:
         f = StateFlags(0)
@@ -603,3 +493,17 @@ class Agent:
         if self.mode is not AgentMode.DISARMED:
             self.motor.command(0.0, 0.0)
             self.disarm()
+
+
+def _workspace(size: int) -> Workspace:
+    """Scratch columns for the period (agent.period.Workspace) of ``size`` entries."""
+    def floats() -> list[float]:
+        return [0.0] * size
+
+    def ints() -> list[int]:
+        return [0] * size
+
+    splits = Splits(*([0.0] * SPLITS for _ in range(len(Splits._fields))))
+    return Workspace(floats(), floats(), floats(), floats(), ints(), floats(), floats(),
+                     floats(), ints(), ints(), floats(), ints(), splits, [-1] * (2 * SPLITS),
+                     ints())

@@ -27,6 +27,7 @@ from agent.config import CONTROL_PARAMS
 from agent.impairment import ImpairedSwarm
 from agent.loop import FixedRateLoop, LoopStats, SystemClock, use_normal_scheduling, use_realtime
 from agent.node import Agent
+from agent.period_log import PeriodLog
 from agent.settings import AgentSettings
 from agent.systemd import Notifier
 from common.ports import SwarmPort
@@ -138,7 +139,11 @@ def _open_agent(s: AgentSettings, session, clock: SystemClock, rt: int,
     if s.pose is not None:
         fixes = FixLink(session, Keys(s.swarm), s.robot_id, clock.wall)
         stack.callback(fixes.close)
-    agent = Agent(s, motor, port, clock, fixes)
+    periods = None
+    if s.record_periods is not None:
+        periods = PeriodLog(s.record_periods)
+        stack.callback(periods.close)
+    agent = Agent(s, motor, port, clock, fixes, periods)
     link = open_link(s.mavlink, AgentVehicle(agent), s.robot_id, clock.monotonic,
                      clock.wall, params=CONTROL_PARAMS)
     stack.callback(link.close)

@@ -88,6 +88,9 @@ class AgentSettings:
                                 "the phase of the agent's start)")
     tick_phase: float = setting(0.0, unit="s", doc="the ticks' offset from multiples of the "
                                 "period (below the period; with align_ticks)", lo=0.0)
+    record_periods: str | None = setting(None, doc="a file to record every period the agent "
+                                         "runs to, what it knew and what it did, for replay "
+                                         "(agent.period_log; absent: none)")
     control: ControlParams = section(ControlParams, "controller gains and limits")
     robot: RobotParams = section(RobotParams, "wheels and driver limits")
     can: CanSettings = section(CanSettings, "the robot's CAN bus")

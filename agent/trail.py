@@ -2,102 +2,215 @@
 
 The safety governor takes a neighbour's data of age t as that neighbour's share of the gap
 between them when it last acted, and counts this robot's own motion since that instant
-(:func:`agent.governor.neighbour_radii`). The motion is that of the pose the robot believes
+(:func:`agent.discs.neighbour_radii`). The motion is that of the pose the robot believes
 (odometry, fused fixes): a jump of the estimate counts as travel.
+
+The positions are an :class:`OwnPath`: a ring of (time, x, y, path walked) records, the
+oldest first. An agent keeps its own in a :class:`Trail` (lists, a record every tick); the
+batch simulator keeps one ring per robot, a record every period. The period reads either
+through the same functions (:func:`path_since`, :func:`own_motion`), in plain floats:
+agents run them interpreted, the batch simulator compiled.
 """
 from __future__ import annotations
 
 import math
 from bisect import bisect_right
+from typing import TYPE_CHECKING, NamedTuple
 
-from agent.governor import TRAIL_ROWS, trail_motion
+if TYPE_CHECKING:
+    from agent.avoidance import FloatBuf, FloatSeq, IntBuf
 
-Splits = tuple[list[float], ...]
+SPLITS = 4           # pieces of a neighbour's data age paired with this robot's path
+TIME_TOL = 1e-9      # s, a record this near a piece's boundary counts as at it
 
 
-def with_motion(rows: tuple[list[float], ...]) -> Splits:
-    """The six rows of a trail (:meth:`Trail.splits`) completed with the rows the governor
-    derives from them (agent.governor.trail_motion)."""
+class OwnPath(NamedTuple):
+    """The robot's believed positions over its last seconds: a ring of ``size`` records of
+    which ``n`` are kept, the oldest at index ``first``, times non-decreasing."""
+
+    t: FloatSeq         # s, when each position was believed (the clock of the stamps)
+    x: FloatSeq         # m
+    y: FloatSeq         # m
+    walked: FloatBuf    # m, the path walked through the records, cumulative
+    first: int
+    n: int
+    size: int
+
+
+class Splits(NamedTuple):
+    """This robot's motion over each split k of a neighbour's data age (k = 0 the
+    stamp's), toward the newest position: the rows :func:`own_motion` fills, then those
+    :func:`trail_motion` derives from them. Each row holds one float per split."""
+
+    walked: FloatBuf        # m, path since the last record at or before the split's start
+    walked_end: FloatBuf    # m, path since the first record at or after its end
+    start_x: FloatBuf       # m, displacement east since that start record
+    start_y: FloatBuf       # m, north
+    end_x: FloatBuf         # m, displacement east since that end record
+    end_y: FloatBuf         # m, north
+    start_len: FloatBuf     # m, the length of (start_x, start_y)
+    end_len: FloatBuf       # m, the length of (end_x, end_y)
+    bulge: FloatBuf         # m, half the minor axis of the ellipse of where it was within k
+    dominated: FloatBuf     # 1.0 where split k + 1 dominates split k, else 0.0
+
+
+def trail_motion(s: Splits) -> None:
+    """Fill the derived rows of ``s`` from its first six, once for all the neighbours that
+    share it: for each split k, the lengths [m] of this robot's displacement since the
+    split's start and since its end; half the minor axis [m] of the ellipse of the
+    positions it can have had within the split (foci where it was at the split's start and
+    end, the path walked within it); and 1.0 where the next split dominates split k (it
+    stood still within k, or moved over k as over k + 1: the same positions at and after
+    their starts and ends, as where both fall between two recorded positions, data younger
+    than the robot's period; the next split ends later), else 0.0 (the last split: 0.0)."""
+    splits = len(s.walked)
+    for k in range(splits):
+        path, start_x, start_y = s.walked[k], s.start_x[k], s.start_y[k]
+        end_x, end_y = s.end_x[k], s.end_y[k]
+        within = path - s.walked_end[k]        # m, walked within the split
+        chord_x, chord_y = start_x - end_x, start_y - end_y
+        s.start_len[k] = math.sqrt(start_x * start_x + start_y * start_y)
+        s.end_len[k] = math.sqrt(end_x * end_x + end_y * end_y)
+        s.bulge[k] = 0.5 * math.sqrt(max(within * within - chord_x * chord_x
+                                         - chord_y * chord_y, 0.0))
+        if k + 1 == splits:
+            s.dominated[k] = 0.0
+            continue
+        same = (path == s.walked[k + 1] and s.walked_end[k] == s.walked_end[k + 1]
+                and start_x == s.start_x[k + 1] and start_y == s.start_y[k + 1]
+                and end_x == s.end_x[k + 1] and end_y == s.end_y[k + 1])
+        # moved over k as over k + 1, or stood still within k
+        s.dominated[k] = 1.0 if path == s.walked_end[k] or same else 0.0
+
+
+def _record(path: OwnPath, i: int) -> int:
+    """The ring's index of the ``i``-th record kept, the oldest 0."""
+    return (path.first + i) % path.size
+
+
+def at_or_before(path: OwnPath, when: float) -> int:
+    """The last record (0: the oldest) at or before time ``when`` [s]; the oldest if none
+    is. The records are nearly evenly spaced (a robot's ticks), so the search starts where
+    the time would lie and walks from there. ``path`` holds a record at least."""
+    last = path.n - 1
+    newest, oldest = path.t[_record(path, last)], path.t[_record(path, 0)]
+    if when + TIME_TOL >= newest:
+        return last
+    if when + TIME_TOL < oldest:
+        return 0
+    i = int((when - oldest) / (newest - oldest) * last)
+    i = 0 if i < 0 else (last if i > last else i)
+    while i < last and path.t[_record(path, i + 1)] <= when + TIME_TOL:
+        i += 1
+    while i > 0 and path.t[_record(path, i)] > when + TIME_TOL:
+        i -= 1
+    return i
+
+
+def at_or_after(path: OwnPath, when: float) -> int:
+    """The first record at or after time ``when`` [s]; the newest if none is (as
+    :func:`at_or_before`)."""
+    last = path.n - 1
+    newest, oldest = path.t[_record(path, last)], path.t[_record(path, 0)]
+    if when - TIME_TOL > newest:
+        return last
+    if when - TIME_TOL <= oldest:
+        return 0
+    i = int((when - oldest) / (newest - oldest) * last)
+    i = 0 if i < 0 else (last if i > last else i)
+    while i > 0 and path.t[_record(path, i - 1)] >= when - TIME_TOL:
+        i -= 1
+    while i < last and path.t[_record(path, i)] < when - TIME_TOL:
+        i += 1
+    return i
+
+
+def path_since(path: OwnPath, start: float) -> float:
+    """The path [m] to the newest position from the last one recorded at or before
+    ``start`` [s] (the oldest, if none; 0 before any): :func:`own_motion`'s first value."""
+    if path.n == 0:
+        return 0.0
+    newest = path.walked[_record(path, path.n - 1)]
+    return newest - path.walked[_record(path, at_or_before(path, start))]
+
+
+def own_motion(path: OwnPath, start: float, span: float, key: IntBuf, out: Splits) -> None:
+    """This robot's motion over each split k of the ``span`` [s] from ``start`` [s] (the
+    neighbour's stamp and data age, split evenly into len(out.walked) pieces), into
+    ``out`` (:class:`Splits`, all zero before any record). ``key`` (two ints a split)
+    holds the records the last call used: where this call's are the same, ``out`` holds
+    its motion already and is left as it is (neighbours whose pieces fall between the same
+    records share it). Set ``key[0]`` to -1 to compute afresh."""
+    pieces = len(out.walked)
+    if path.n == 0:
+        for k in range(pieces):
+            out.walked[k] = out.walked_end[k] = out.start_x[k] = out.start_y[k] = 0.0
+            out.end_x[k] = out.end_y[k] = 0.0
+        trail_motion(out)
+        key[0] = -1
+        return
+    same = key[0] >= 0
+    for k in range(pieces):
+        lo = at_or_before(path, start + span * k / pieces)
+        hi = at_or_after(path, start + span * (k + 1) / pieces)
+        if key[2 * k] != lo or key[2 * k + 1] != hi:
+            same = False
+            key[2 * k], key[2 * k + 1] = lo, hi
+    if same:
+        return
+    newest = _record(path, path.n - 1)
+    last, x, y = path.walked[newest], path.x[newest], path.y[newest]
+    for k in range(pieces):
+        i, j = _record(path, key[2 * k]), _record(path, key[2 * k + 1])
+        out.walked[k], out.walked_end[k] = last - path.walked[i], last - path.walked[j]
+        out.start_x[k], out.start_y[k] = x - path.x[i], y - path.y[i]
+        out.end_x[k], out.end_y[k] = x - path.x[j], y - path.y[j]
+    trail_motion(out)
+
+
+def splits_of(rows: tuple[list[float], ...]) -> Splits:
+    """The splits whose first six rows are ``rows`` (as :func:`own_motion` fills them),
+    with the rows derived from them (:func:`trail_motion`)."""
     pieces = len(rows[0])
-    trail = tuple(rows) + tuple([0.0] * pieces for _ in range(TRAIL_ROWS - len(rows)))
-    trail_motion(trail)
-    return trail
+    s = Splits(*(list(r) for r in rows), *([0.0] * pieces for _ in range(4)))
+    trail_motion(s)
+    return s
 
 
 def straight(speed: float, ux: float, uy: float, age: float, pieces: int) -> Splits:
-    """The splits (as :meth:`Trail.splits` gives them) of a robot that drove straight along
-    the unit vector (``ux``, ``uy``) at ``speed`` [m/s] over the whole ``age`` [s], split
-    ``pieces`` ways: for a statement or a benchmark of the governor's discs."""
+    """The splits of a robot that drove straight along the unit vector (``ux``, ``uy``)
+    at ``speed`` [m/s] over the whole ``age`` [s], split ``pieces`` ways: for a statement
+    or a benchmark of the governor's discs."""
     paths = [speed * age * (pieces - k) / pieces for k in range(pieces)]
     inner = [speed * age * (pieces - k - 1) / pieces for k in range(pieces)]
-    return with_motion((paths, inner, [d * ux for d in paths], [d * uy for d in paths],
-                        [d * ux for d in inner], [d * uy for d in inner]))
+    return splits_of((paths, inner, [d * ux for d in paths], [d * uy for d in paths],
+                      [d * ux for d in inner], [d * uy for d in inner]))
 
 
 class Trail:
-    """The believed positions of the last ``span`` [s]: their times [s], the positions [m]
-    and the path [m] walked through them."""
+    """An agent's own believed positions of the last ``span`` [s] (at least): the
+    :class:`OwnPath` its period reads (:meth:`path`), a record each tick."""
 
     def __init__(self, span: float):
         self.span = span
         self._t: list[float] = []
-        self._path: list[float] = []        # m, cumulative, from the first position
+        self._walked: list[float] = []        # m, cumulative, from the first position
         self._x: list[float] = []
         self._y: list[float] = []
-        # the splits given since the last record, by where their pieces' boundaries fall
-        # among the recorded times: neighbours whose pieces start and end between the same
-        # records (the same stamp, or stamps within a period of the trail) share them
-        self._given: dict[tuple[int, ...], Splits] = {}
 
     def record(self, t: float, x: float, y: float) -> None:
         """The position (x, y) [m] at time t [s] (non-decreasing)."""
         step = math.hypot(x - self._x[-1], y - self._y[-1]) if self._x else 0.0
         self._t.append(t)
-        self._path.append((self._path[-1] if self._path else 0.0) + step)
+        self._walked.append((self._walked[-1] if self._walked else 0.0) + step)
         self._x.append(x)
         self._y.append(y)
-        self._given = {}
         if self._t[0] < t - 2.0 * self.span:      # drop the old half now and then
             cut = bisect_right(self._t, t - self.span) - 1
-            del self._t[:cut], self._path[:cut], self._x[:cut], self._y[:cut]
+            del self._t[:cut], self._walked[:cut], self._x[:cut], self._y[:cut]
 
-    def path_since(self, start: float) -> float:
-        """The path [m] to the newest position from the last position recorded at or
-        before ``start`` [s] (the first, if none): :meth:`splits`'s first value, alone."""
-        t, path = self._t, self._path
-        if not path:
-            return 0.0
-        return path[-1] - path[max(bisect_right(t, start) - 1, 0)]
+    def path(self) -> OwnPath:
+        """The records, for the period (read, do not change)."""
+        n = len(self._t)
+        return OwnPath(self._t, self._x, self._y, self._walked, 0, n, max(n, 1))
 
-    def splits(self, start: float, span: float, pieces: int) -> Splits:
-        """This robot's motion over each piece k = 0 .. ``pieces`` - 1 of the time from
-        ``start`` [s], ``span`` [s] long, split evenly, as
-        :func:`agent.governor.neighbour_radii` takes it: the path [m] to the newest
-        position from the last position recorded at or before the piece's start, and from
-        the first at or after its end (the newest, if none); the displacement east and
-        north [m] to the newest position from each of those two. All zero before any.
-        Then the rows the governor derives from those (agent.governor.trail_motion). The
-        lists are shared with every caller whose pieces fall between the same recorded
-        positions until the next record: read, do not change."""
-        t, path, xs, ys = self._t, self._path, self._x, self._y
-        if not path:
-            return with_motion(tuple([0.0] * pieces for _ in range(6)))
-        # where each boundary falls among the recorded times: the index past the last
-        # time at or before it, negated where a time equals it
-        key = []
-        for m in range(pieces + 1):
-            edge = start + span * m / pieces
-            i = bisect_right(t, edge)
-            key.append(-i if i and t[i - 1] == edge else i)
-        answer = self._given.get(tuple(key))
-        if answer is not None:
-            return answer
-        # each boundary's last position at or before it, and first at or after it
-        last, newest, x, y = path[-1], len(path) - 1, xs[-1], ys[-1]
-        first = [max(abs(i) - 1, 0) for i in key[:-1]]
-        end = [-i - 1 if i < 0 else min(i, newest) for i in key[1:]]
-        answer = with_motion(([last - path[i] for i in first], [last - path[j] for j in end],
-                              [x - xs[i] for i in first], [y - ys[i] for i in first],
-                              [x - xs[j] for j in end], [y - ys[j] for j in end]))
-        self._given[tuple(key)] = answer
-        return answer

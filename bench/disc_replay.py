@@ -6,7 +6,7 @@
 Runs the world of ``bench/batch_scaling.py`` (a grid at 5 m spacing through obstacles, the
 profile on the wheels plant, every state ``--link-delay`` late) interpreted for
 ``--periods`` periods, recording the arguments of every call of
-``agent.governor.neighbour_radii``, then times the compiled function over the recorded
+``agent.discs.neighbour_radii`` (by the period), then times the compiled function over the recorded
 calls, in their order (best of 7 passes), and once more with each recorded disc repeated
 a thousand times in a row (where branches are always predicted). The figure is what a
 disc costs where the batch simulator spends it, unlike a disc of made-up arguments.
@@ -20,8 +20,11 @@ import time
 import numpy as np
 from batch_scaling import swarm
 
+import agent.period as period
 from agent.config import ControlParams
-from firmware_sim import compiled, swarm_step
+from agent.params import NeighbourModel
+from agent.trail import Splits
+from firmware_sim import compiled
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
@@ -29,20 +32,23 @@ from hil.robot_profile import load_robot_profile
 
 
 def record(robots: int, periods: int, robot_file: str, delay: float
-           ) -> tuple[np.ndarray, np.ndarray]:
-    """(arguments (C, 16) but the trail, trails (C, rows, splits)) of every disc built."""
+           ) -> tuple[np.ndarray, np.ndarray, NeighbourModel]:
+    """(arguments (C, 6) but the trail and the model, trails (C, rows, splits), the model)
+    of every disc built."""
     rows: list[list[float]] = []
     trails: list[np.ndarray] = []
-    built = swarm_step.neighbour_radii
+    models: list[NeighbourModel] = []
+    built = period.neighbour_radii
 
     def recorded(*args):
-        rows.append([float(v) for v in args[:6] + args[7:]])
+        rows.append([float(v) for v in args[:6]])
         trails.append(np.array(args[6], dtype=float))
+        models.append(args[7])
         return built(*args)
 
     poses, form, obstacles = swarm(robots)
     control = ControlParams(governor=True)
-    swarm_step.neighbour_radii = recorded
+    period.neighbour_radii = recorded
     try:
         simulate(np.arange(robots), poses, form, obstacles, control,
                  load_robot_profile(robot_file),
@@ -50,10 +56,10 @@ def record(robots: int, periods: int, robot_file: str, delay: float
                             compiled=False, plant=PlantKind.WHEELS),
                  world=WorldParams(link_delay=delay) if delay > 0.0 else None)
     finally:
-        swarm_step.neighbour_radii = built
+        period.neighbour_radii = built
     if not rows:
         raise SystemExit("no disc was built: give more robots or periods")
-    return np.array(rows), np.array(trails)
+    return np.array(rows), np.array(trails), models[0]
 
 
 def best_ns(loop, rows: np.ndarray, trails: np.ndarray) -> float:
@@ -77,7 +83,7 @@ def main() -> None:
     import numba
 
     t0 = time.perf_counter()
-    rows, trails = record(args.robots, args.periods, args.robot, args.link_delay)
+    rows, trails, model = record(args.robots, args.periods, args.robot, args.link_delay)
     print(f"recorded {len(rows)} discs in {time.perf_counter() - t0:.0f} s "
           f"(median data age {np.median(rows[:, 5]) * 1e3:.0f} ms)", flush=True)
     disc = compiled.kernels().neighbour_radii
@@ -86,9 +92,9 @@ def main() -> None:
     def loop(rows, trails):
         total = 0.0
         for i in range(len(rows)):
-            r = rows[i]
-            out = disc(r[0], r[1], r[2], r[3], r[4], r[5], trails[i], r[6], r[7], r[8],
-                       r[9], r[10], r[11], r[12], r[13], r[14], r[15])
+            r, t = rows[i], trails[i]
+            splits = Splits(t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8], t[9])
+            out = disc(r[0], r[1], r[2], r[3], r[4], r[5], splits, model)
             total += out[1] + out[2] + out[3] + out[4]
         return total
 

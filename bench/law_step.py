@@ -14,14 +14,17 @@ import time
 
 import numpy as np
 
+from agent.avoidance import Surroundings
 from agent.config import ControlParams, RobotParams
-from agent.governor import NO_GAPS, fold_hazard, frame_limits
-from agent.law import LawMemory, LawParams, governor_frame, last_velocity, law_step
+from agent.governor import NO_GAPS, braking_of, fold_hazard, frame_limits, limit_frame
+from agent.law import LawMemory, Reference, last_velocity, law_step
+from agent.params import LawParams
 
-POSE, REF = (0.0, 0.0, 0.3), (5.0, 1.0, 2.0, 0.0)   # m, rad; reference m and m/s
+POSE, REF = (0.0, 0.0, 0.3), Reference(5.0, 1.0, 2.0, 0.0)   # m, rad; reference m and m/s
 NBR_X, NBR_Y, NBR_H = [2.0, 3.0, -1.0], [1.0, -2.0, 4.0], [1.0, 0.0, 0.0]
 NBR_G = [0.0, 0.5, 1.0]          # m, the neighbours' governor discs beyond a
 OBS_X, OBS_Y, OBS_R = [6.0], [0.0], [1.0]
+AROUND = Surroundings(NBR_X, NBR_Y, NBR_H, NBR_G, len(NBR_X), OBS_X, OBS_Y, OBS_R, len(OBS_R))
 
 
 HAZ_X, HAZ_Y = NBR_X + OBS_X, NBR_Y + OBS_Y
@@ -31,18 +34,18 @@ HAZ_M = [1.0] * len(NBR_X) + [0.0] * len(OBS_R)
 
 
 def law(p: ControlParams):
-    """The governor's limits among the hazards (agent.law.governor_frame and
-    agent.governor.fold_hazard, as an agent folds them) and the law step."""
+    """The governor's limits among the hazards (agent.governor, as the period folds them)
+    and the law step."""
     lp = LawParams.of(p, RobotParams())
 
     def step(mem: LawMemory) -> LawMemory:
-        frame = governor_frame(POSE[2], *last_velocity(mem, lp), lp, p.period)
+        frame = limit_frame(POSE[2], *last_velocity(mem, lp), braking_of(lp, p.period))
         gaps = NO_GAPS
         for h in range(len(HAZ_R)):
             gaps = fold_hazard(gaps, frame, HAZ_X[h] - POSE[0], HAZ_Y[h] - POSE[1], HAZ_R[h],
                                HAZ_S[h], HAZ_M[h])
-        return law_step(*POSE, *REF, NBR_X, NBR_Y, NBR_H, NBR_G, OBS_X, OBS_Y, OBS_R,
-                        frame_limits(gaps, frame), mem, lp, p.period)[4]
+        return law_step(*POSE, REF, AROUND, frame_limits(gaps, frame), mem, lp,
+                        p.period).memory
     return LawMemory(), step
 
 

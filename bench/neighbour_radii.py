@@ -1,4 +1,4 @@
-"""Cost of the governor's disc of one neighbour (agent.governor.neighbour_radii, interpreted,
+"""Cost of the governor's disc of one neighbour (agent.discs.neighbour_radii, interpreted,
 as an agent runs it for every neighbour every period), by the age of the neighbour's data.
 
 20 neighbours round this robot at 3-7 m, each driving away from it at the places' pace
@@ -17,9 +17,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from agent.config import ControlParams, RobotParams, commitment, disc_args  # noqa: E402
-from agent.governor import SPLITS, neighbour_radii  # noqa: E402
-from agent.trail import straight  # noqa: E402
+from agent.config import ControlParams, RobotParams  # noqa: E402
+from agent.discs import neighbour_radii  # noqa: E402
+from agent.params import LawParams, NeighbourModel  # noqa: E402
+from agent.trail import SPLITS, straight  # noqa: E402
 from hil.robot_profile import load_robot_profile  # noqa: E402
 
 NEIGHBOURS, ROUNDS, REPEATS = 20, 200, 7
@@ -30,8 +31,8 @@ def per_neighbour_us(robot_file: str | None, pace: float, age: float) -> float:
     """The best time [µs] of one neighbour_radii call over REPEATS timings."""
     control = ControlParams()
     robot = load_robot_profile(robot_file) if robot_file else RobotParams()
-    half_base, disc = disc_args(control, robot, 1.0)
-    commit = commitment(control, robot)
+    model = NeighbourModel.of(LawParams.of(control, robot), control.a, control.period, 1.0,
+                              robot.watchdog_timeout)
     trail = straight(pace, 0.0, 1.0, age, SPLITS)   # this robot, along y at the pace
     calls = []
     for n in range(NEIGHBOURS):
@@ -42,8 +43,7 @@ def per_neighbour_us(robot_file: str | None, pace: float, age: float) -> float:
         t0 = time.perf_counter()
         for _ in range(ROUNDS):
             for rel_x, rel_y, heading in calls:
-                neighbour_radii(rel_x, rel_y, heading, pace, 0.1, age, trail, disc[0],
-                                disc[1], half_base, *disc[2:], *commit)
+                neighbour_radii(rel_x, rel_y, heading, pace, 0.1, age, trail, model)
         best = min(best, (time.perf_counter() - t0) / (ROUNDS * NEIGHBOURS))
     return best * 1e6
 

@@ -23,9 +23,10 @@ from typing import Callable
 import numpy as np
 
 from agent.config import ControlParams, RobotParams
-from agent.exchange import NOBODY
-from agent.formation import Formation
-from agent.law import LawParams
+from agent.exchange import NOBODY, Exchange
+from agent.formation import Formation, Places
+from agent.neighbours import Reports
+from agent.params import PeriodParams
 from agent.progress import TOLERANCE_MARGIN
 from agent.settings import TimeoutSettings
 from firmware_sim import compiled, swarm_step, world_step
@@ -33,7 +34,7 @@ from firmware_sim.batch_pose import BatchPoseSource
 from firmware_sim.metrics import RunMetrics
 from firmware_sim.mocap_sim import MocapParams
 from firmware_sim.plant import PlantKind
-from firmware_sim.swarm_step import MEM_F, MEM_I, PLACE, PLACE_SINCE
+from firmware_sim.swarm_step import MEMORY, Outputs, SwarmState, World
 from firmware_sim.world import Obstacles, WorldParams
 
 log = logging.getLogger(__name__)
@@ -103,6 +104,9 @@ def _engine(options: SimOptions) -> types.SimpleNamespace:
     return compiled.kernels() if want else _interpreted()
 
 
+# the columns of a period's command (swarm_step.Outputs.cmd) that a robot's drivers hold
+# should its agent die: v, u and the wheels' set-points
+COMMAND = np.array([0, 1, 4, 5])
 PARALLEL_MIN = 500   # robots; below, waking threads costs more than it saves
 
 
@@ -138,10 +142,9 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         compiled.use_threads(n >= PARALLEL_MIN)
     T = control.period
     steps = int(round(options.duration / T))
-    # the ideal plant's robot follows any command at once; the wheels' limits are the law's
-    params = LawParams.of(control, None if ideal else robot)
     offsets = np.ascontiguousarray(formation.offsets, dtype=float).reshape(n, 2)
-    motion = np.array([*formation.center0, *formation.velocity, formation.omega], dtype=float)
+    places = Places(offsets, np.array([*formation.center0, *formation.velocity,
+                                       formation.omega], dtype=float))
     obs = np.column_stack([obstacles.centers.reshape(-1, 2), obstacles.radii]).astype(float)
     metrics = RunMetrics(ids=ids, a=control.a)
     every = options.record_every
@@ -158,14 +161,14 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     law_seconds = 0.0
     reach = max(control.v_max, robot.v_wheel_max) * T   # m, farthest move per period
 
-    mem_f, mem_i = np.zeros((n, MEM_F)), np.zeros((n, MEM_I), np.int64)
+    mem = np.zeros(n, MEMORY)
     # each robot's place exchange (agent.exchange.Exchange): its own place, no partner
-    mem_i[:, PLACE], mem_i[:, PLACE + 1:PLACE + 3] = np.arange(n), NOBODY
-    mem_f[:, PLACE_SINCE] = -np.inf
-    new_f, new_i = mem_f.copy(), mem_i.copy()
+    mem["slot"], mem["partner"], mem["other"], mem["since"] = np.arange(n), NOBODY, NOBODY, \
+        -np.inf
+    new_mem = mem.copy()
     cap, watch_cap = 32, 8      # sensed per robot, watched per robot (grown when needed)
     held, new_held = np.full((n, cap + 1), -1, np.int64), np.full((n, cap + 1), -1, np.int64)
-    cmd, ref, near = np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 2))
+    cmd, ref, near = np.zeros((n, 6)), np.zeros((n, 4)), np.zeros((n, 2))
     last_mode, err, within = np.zeros(n), np.zeros(n), np.zeros(n, bool)
     # wheels plant: drive latency in whole substeps; the commands of the last substeps, at
     # rest before the first period
@@ -177,42 +180,50 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
     watch_j, watch_k = np.empty((n, watch_cap), np.int64), np.empty((n, watch_cap), np.int64)
     hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
     w = _WorldState(world, n, ids, pose, T, control, robot, ideal, k, mocap)
+    # the ideal plant's robot follows any command at once; the wheels' limits are the law's
+    params = PeriodParams.of(control, None if ideal else robot, options.sensing_range,
+                             w.staleness, robot.watchdog_timeout)
+    top = params.model.top_speed
     for step in range(steps + 1):
         t = step * T
         t0 = clock() if clock else 0.0
-        own, seen, view, path, world_i = w.before_control(step, t, pose, cmd,
-                                                          mem_i[:, PLACE:PLACE + 3])
-        if w.pose_source is not None:       # agent.law.moved_estimate, for every robot
-            mem_f[:, :2] += w.pose_source.jump
+        state = w.before_control(step, t, pose, cmd, mem, held)
+        own = state.own
         if own is not pose:
             metrics.max_pose_error = max(metrics.max_pose_error, float(
                 np.hypot(own[:, 0] - pose[:, 0], own[:, 1] - pose[:, 1]).max(initial=0.0)))
+        # the reports that may put a robot within the sensing range: their robots may be
+        # nearer than their reports by what the fastest robot travels in their age, and
+        # where the reports put them now is that far from the reports
+        age = min(t - float(np.min(w.reports.stamp, initial=t)), w.staleness)
+        query = options.sensing_range + 2.0 * top * max(age, 0.0)
+        period_world = World(t, T, step, w.truth, world.seed, world.detection_noise,
+                             world.detection_dropout, query, reach)
         while True:
-            need, need_watch = k.control(pose, own, seen, view, path, mem_f, mem_i, held, offsets,
-                                         motion, t, obs, params, T, options.sensing_range,
-                                         control.a, reach, cap, watch_cap, world_i, w.world_f,
-                                         cmd, ref, new_f, new_i, new_held, near, watch_j,
-                                         watch_k)
+            outs = Outputs(cmd, ref, new_mem, new_held, near, watch_j, watch_k)
+            need, need_watch = k.control(pose, state, w.reports, outs, places, obs, params,
+                                         period_world, cap, watch_cap)
             if need <= cap and need_watch <= watch_cap:
                 break
             if need > cap:
                 grown = np.full((n, int(need) + 1), -1, np.int64)
                 grown[:, :cap + 1] = held
                 held, new_held = grown, np.full((n, int(need) + 1), -1, np.int64)
+                state = state._replace(held=held)
             cap, watch_cap = max(cap, int(need)), max(watch_cap, int(need_watch))
             watch_j = np.empty((n, watch_cap), np.int64)
             watch_k = np.empty((n, watch_cap), np.int64)
             hit_j, hit_k = np.zeros((n, watch_cap), bool), np.zeros((n, watch_cap), bool)
         if clock:
             law_seconds += clock() - t0
-        mem_f, new_f, mem_i, new_i = new_f, mem_f, new_i, mem_i
+        mem, new_mem = new_mem, mem
         held, new_held = new_held, held
         if not w.alive.all():         # a dead agent's exchange state stays as it left it
             dead = ~w.alive
-            mem_i[dead, PLACE:], mem_f[dead, PLACE_SINCE] = (new_i[dead, PLACE:],
-                                                             new_f[dead, PLACE_SINCE])
-        metrics.observe_places(mem_i[:, PLACE], new_i[:, PLACE], w.alive)
-        w.after_control(step, t, own, cmd, mem_i[:, PLACE:PLACE + 3])
+            for name in Exchange._fields:
+                mem[name][dead] = new_mem[name][dead]
+        metrics.observe_places(mem["slot"], new_mem["slot"], w.alive)
+        w.after_control(step, t, own, cmd, _places(mem))
         v, u, mode = cmd[:, 0], cmd[:, 1], cmd[:, 2]       # views, overwritten next period
         max_v, max_u, switches, all_within = k.period_summary(
             pose, cmd, ref, control.K, TOLERANCE_MARGIN, step == 0, w.alive, last_mode, err,
@@ -231,7 +242,7 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
         watched = (near[:, 0] <= pair_limit) | (near[:, 1] <= clear_limit)
         # the commands the drivers follow in each substep (issued a drive latency earlier)
         issued[:-S] = issued[S:]
-        issued[-S:] = cmd[:, :2]
+        issued[-S:] = cmd[:, :2] if ideal else cmd[:, 4:6]
         if last:
             pos[0] = pose[:, :2]
         else:
@@ -266,6 +277,11 @@ def simulate(ids: np.ndarray, poses0: np.ndarray, formation: Formation, obstacle
                      ref=rec_ref, metrics=metrics, law_seconds=law_seconds)
 
 
+def _places(mem: np.ndarray) -> np.ndarray:
+    """(N, 3) each robot's place exchange as it publishes it: slot, partner, other."""
+    return np.column_stack([mem["slot"], mem["partner"], mem["other"]])
+
+
 class _WorldState:
     """The imperfect world's state through a run: what the robots know, the slip of their
     wheels, their encoder readings and who is dead (:mod:`firmware_sim.world_step`)."""
@@ -280,16 +296,12 @@ class _WorldState:
         self.truth = world.ideal
         self.watchdog = robot.watchdog_timeout
         self.staleness = world.staleness(TimeoutSettings().staleness)
-        stop_time = self.watchdog + (0.0 if ideal else robot.drive_latency)
-        top_speed = control.v_max if ideal else min(control.v_max, robot.v_wheel_max)
-        self.world_f = np.array([world.detection_noise, world.detection_dropout,
-                                 self.staleness, stop_time, top_speed])
         self.alive = np.ones(n, bool)
         index = {int(r): i for i, r in enumerate(ids)}
         self.kill_at = np.full(n, np.inf)
         for kill in world.kill:
             self.kill_at[index[kill.robot]] = kill.at
-        self.held = np.zeros((n, 2))           # the last command of each agent alive
+        self.held = np.zeros((n, len(COMMAND)))   # the last command of each agent alive
         self.est = pose.copy()                 # odometry
         self.last_read = np.zeros((n, 2))
         if world.odometry:                     # the first reading sets the origin
@@ -298,41 +310,51 @@ class _WorldState:
         depth = int(math.ceil((world.link_delay + 4.0 * world.link_jitter) / period)) + 3
         self.hist = np.zeros((depth, n, 9))
         self.arrive = np.full((depth, n), np.inf)
-        # the robots exchanged their states at rest before the mission started
-        self.view = np.zeros((n, 9))
-        self.view[:, :3], self.view[:, 5] = pose, 0.0
-        self.view[:, 6], self.view[:, 7:] = np.arange(n), NOBODY    # their own places
+        # the robots exchanged their states at rest before the mission started (robot i
+        # is row i: the batch's robot ids are their indices)
+        self.reports = Reports(np.arange(n), np.zeros(n), pose[:, 0].copy(),
+                               pose[:, 1].copy(), pose[:, 2].copy(), np.zeros(n), np.zeros(n),
+                               np.arange(n), np.full(n, NOBODY), np.full(n, NOBODY))
         self.bad = np.zeros(n, np.int64)
         self.slip = np.zeros((n, 2))
         self.seen = np.zeros((n, 3))
         # each robot's believed position (x, y) [m] and the cumulative path [m] through
-        # them, a ring over its last periods (swarm_step.control; at rest before)
-        self.path_ring = np.zeros((1 if self.truth else
-                                   int(math.ceil(self.staleness / period)) + 2, n, 3))
-        self.path_ring[:, :, :2] = pose[:, :2]
+        # them, a ring over its last periods, with their times (at rest before)
+        ring = 1 if self.truth else int(math.ceil(self.staleness / period)) + 2
+        self.path = np.zeros((n, 3, ring))
+        self.path[:, 0], self.path[:, 1] = pose[:, :1], pose[:, 1:2]
+        self.path_t = np.zeros(ring)
+        self.no_jump = np.zeros((n, 2))
 
     def before_control(self, step: int, t: float, pose: np.ndarray, cmd: np.ndarray,
-                       places: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(own pose, seen positions, received states, own paths, world_i) for
-        :func:`swarm_step.control` at t [s]; ``cmd`` holds the last period's commands,
-        ``places`` (N, 3) the robots' exchange states (slot, partner, other)."""
+                       mem: np.ndarray, held: np.ndarray) -> SwarmState:
+        """What the robots know at t [s] (:class:`swarm_step.SwarmState`); ``cmd`` holds the
+        last period's commands, ``mem`` their memories (swarm_step.MEMORY), ``held`` their
+        pairs active last period."""
         np.less(t, self.kill_at, out=self.alive)
+        rep = self.reports
         if self.truth:              # everyone knows everyone's current state (no age)
-            self.view[:, :3], self.view[:, 3:5], self.view[:, 5] = pose, cmd[:, :2], t
-            self.view[:, 6:] = places
-            return pose, pose, self.view, self.path_ring, np.array([1, 0, step], np.int64)
-        self.k.deliver(t, self.hist, self.arrive, self.view, self.staleness, self.seen)
+            rep.x[:], rep.y[:], rep.theta[:] = pose[:, 0], pose[:, 1], pose[:, 2]
+            rep.v[:], rep.u[:], rep.stamp[:] = cmd[:, 0], cmd[:, 1], np.full(len(pose), t)
+            rep.slot[:], rep.partner[:], rep.other[:] = mem["slot"], mem["partner"], \
+                mem["other"]
+            return SwarmState(pose, self.no_jump, pose, self.path, self.path_t, 0, 1, mem, held)
+        self.k.deliver(t, self.hist, self.arrive, rep, self.staleness, self.seen)
         own = self.est if self.world.odometry else pose
+        jump = self.no_jump
         if self.pose_source is not None:
             own = self.pose_source.step(step, t, self.est, pose)
-        ring = len(self.path_ring)
-        last, now = self.path_ring[(step - 1) % ring], self.path_ring[step % ring]
-        now[:, :2] = own[:, :2]
-        np.add(last[:, 2], np.hypot(now[:, 0] - last[:, 0], now[:, 1] - last[:, 1]),
-               out=now[:, 2])
-        return own, self.seen, self.view, self.path_ring, np.array([0, self.world.seed, step],
-                                                                    np.int64)
+            jump = self.pose_source.jump
+        ring = self.path.shape[2]
+        last, now = (step - 1) % ring, step % ring
+        self.path[:, 0, now], self.path[:, 1, now] = own[:, 0], own[:, 1]
+        np.add(self.path[:, 2, last], np.hypot(own[:, 0] - self.path[:, 0, last],
+                                               own[:, 1] - self.path[:, 1, last]),
+               out=self.path[:, 2, now])
+        self.path_t[now] = t
+        count = min(step + 1, ring)
+        return SwarmState(own, jump, self.seen, self.path, self.path_t,
+                          (step + 1 - count) % ring, count, mem, held)
 
     def after_control(self, step: int, t: float, own: np.ndarray, cmd: np.ndarray,
                       places: np.ndarray) -> None:
@@ -340,12 +362,12 @@ class _WorldState:
         their watchdog stops them); the live ones publish their state (``places``: their
         exchange states, slot, partner and other)."""
         if self.pose_source is not None:          # failsafe HOLD: no fix for too long
-            cmd[self.pose_source.held, :2] = 0.0
+            cmd[self.pose_source.held, :2] = cmd[self.pose_source.held, 4:] = 0.0
         if self.world.kill:
             alive, dead = self.alive, ~self.alive
-            self.held[alive] = cmd[alive, :2]
+            self.held[alive] = cmd[alive][:, COMMAND]
             tripped = t >= self.kill_at + self.watchdog
-            cmd[dead, :2] = np.where(tripped[dead, None], 0.0, self.held[dead])
+            cmd[np.ix_(dead, COMMAND)] = np.where(tripped[dead, None], 0.0, self.held[dead])
         if not self.truth:
             w = self.world
             self.k.publish(step, self.period, own, cmd, places, self.alive, w.seed,

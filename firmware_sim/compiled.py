@@ -35,11 +35,12 @@ from typing import Any
 
 log = logging.getLogger(__name__)
 
-SOURCES = ("common.draws", "agent.kinematics", "agent.avoidance", "agent.law", "agent.formation",
-           "agent.exchange", "agent.governor", "agent.neighbours", "agent.odometry",
+SOURCES = ("common.draws", "agent.kinematics", "agent.avoidance", "agent.braking",
+           "agent.trail", "agent.discs", "agent.governor", "agent.law", "agent.formation",
+           "agent.neighbours", "agent.exchange", "agent.period", "agent.odometry",
            "firmware_sim.world_step", "firmware_sim.swarm_step")
 # modules whose functions are compiled into their callers (module docstring)
-INLINED = ("agent.governor",)
+INLINED = ("agent.braking", "agent.trail", "agent.discs", "agent.governor")
 
 
 def available() -> bool:

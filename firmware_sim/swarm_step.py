@@ -13,43 +13,33 @@ could be the closest or closer than a during the period (see :func:`control`).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from agent.exchange import NOBODY, Exchange, exchange_step, place
-from agent.formation import reference_point
-from agent.governor import (
-    NO_GAPS,
-    SPLITS,
-    TRAIL_ROWS,
-    binding,
-    fold_hazard,
-    frame_limits,
-    neighbour_floor,
-    neighbour_radii,
-    silent_radius,
-    trail_motion,
-)
-from agent.kinematics import TWO_PI, arc_step, body_velocity, wheel_command
-from agent.law import (
-    LawMemory,
-    LawParams,
-    governor_frame,
-    last_velocity,
-    law_step,
-    may_pass,
-    moved_estimate,
-    pair_active,
-)
-from firmware_sim.world_step import FRESH, NONE, STALE, detect
+from agent.exchange import Exchange
+from agent.kinematics import TWO_PI, arc_step, body_velocity
+from agent.law import LawMemory
+from agent.neighbours import Reports
+from agent.params import PeriodParams
+from agent.period import Detections, Inputs, Memory, Own, Workspace, robot_period
+from agent.trail import SPLITS, OwnPath, Splits
+from firmware_sim.world_step import detect
+
+if TYPE_CHECKING:
+    from agent.formation import Places
+    from agent.params import LawParams, NeighbourModel
 
 prange = range   # numba.prange when compiled
 
-# the law's memory per robot (control): floats prev_ex, prev_ey, center_x, center_y, radius,
-# wheel_r, wheel_l, then the place exchange's since; ints has_prev, avoiding, side, passing,
-# then the place exchange's slot, partner, other and giving (agent.exchange.Exchange)
-MEM_F, MEM_I = 8, 8
-PLACE, PLACE_SINCE = 4, 7
+# a robot's memory (agent.period.Memory) as a record of the batch's memory arrays: its
+# law's, then its place exchange's (load_memory, store_memory)
+MEMORY = np.dtype([(name, {float: np.float64, bool: np.bool_, int: np.int64}[type(value)])
+                   for record in (LawMemory(), Exchange(0))
+                   for name, value in zip(record._fields, record)])
+
+
+SPLIT_ROWS = len(Splits._fields)
 
 
 Grid = tuple[np.ndarray, np.ndarray, float, float, float, int, int]
@@ -178,222 +168,135 @@ def _watch(i: int, x: float, y: float, m: int, k: int, nbr_d: np.ndarray,
     return max(w + 1, wk + 1)
 
 
-def at_or_before(step: int, since: float, period: float, ring: int) -> int:
-    """The row of the ring of the last periods' paths (``ring`` rows, ``step`` the current
-    period's) of the period at or before ``since`` [s] ago (the oldest kept, if beyond)."""
-    ago = min(max(int(math.ceil(since / period - 1e-9)), 0), ring - 1)
-    return (step - ago) % ring
+class SwarmState(NamedTuple):
+    """What every robot knows at a period's start, by robot index (the robots' ids are
+    their indices): the inputs of their periods that the batch simulator keeps."""
+
+    own: np.ndarray         # (N, 3) believed pose [m, m, rad]; (N, 4) with a pose source:
+    #                         and the position's uncertainty [m]
+    jump: np.ndarray        # (N, 2) m, what pose fixes moved each estimate this period
+    seen: np.ndarray        # (N, 3) where each report puts its robot now, x, y [m], and
+    #                         NONE, FRESH or STALE (firmware_sim.world_step): the grid's
+    path: np.ndarray        # (N, 3, K) each robot's believed x, y [m] and the path [m]
+    #                         walked through them over its last K periods, a ring
+    path_t: np.ndarray      # (K,) s, the ring's times
+    path_first: int         # the ring's oldest record
+    path_n: int         # records kept
+    memory: np.ndarray      # (N,) MEMORY records
+    held: np.ndarray        # (N, C) the ids of each robot's pairs active, -1 ending
 
 
-def at_or_after(step: int, since: float, period: float, ring: int) -> int:
-    """The row, as :func:`at_or_before`, of the period at or after ``since`` [s] ago (the
-    current one, if since is below a period)."""
-    ago = min(max(int(math.floor(since / period + 1e-9)), 0), ring - 1)
-    return (step - ago) % ring
+class Outputs(NamedTuple):
+    """What :func:`control` writes, by robot index."""
+
+    cmd: np.ndarray         # (N, 6) v [m/s], u [rad/s], mode, the speed the governor
+    #                         allowed when it acted [m/s] (inf: it did not), the wheels'
+    #                         set-points right, left [rev/s]
+    ref: np.ndarray         # (N, 4) p_d [m], p_d_dot [m/s]
+    memory: np.ndarray      # (N,) MEMORY records
+    held: np.ndarray        # (N, C) as SwarmState.held
+    near: np.ndarray        # (N, 2) m, the true distance to the nearest neighbour and the
+    #                         smallest clearance to an obstacle in range (inf: none)
+    watch_j: np.ndarray     # (N, W) the robots j > i to watch, -1 ending
+    watch_k: np.ndarray     # (N, W) the obstacles to watch, -1 ending
 
 
-def own_motion(path: np.ndarray, step: int, i: int, age: float, period: float,
-               trail: np.ndarray) -> None:
-    """Fill ``trail`` (agent.governor.neighbour_radii's rows) with robot ``i``'s motion
-    over each split of the last ``age`` [s], from its path (``path``: the ring of the
-    robots' (x, y, path length) of the last periods, ``step`` the current period's):
-    from the period at or before each split's start, and at or after its end."""
-    ring = len(path)
-    now = path[step % ring, i]
-    for piece in range(SPLITS):
-        since = age * (SPLITS - piece) / SPLITS
-        start = path[at_or_before(step, since, period, ring), i]
-        end = path[at_or_after(step, since - age / SPLITS, period, ring), i]
-        trail[0, piece] = now[2] - start[2]
-        trail[1, piece] = now[2] - end[2]
-        trail[2, piece] = now[0] - start[0]
-        trail[3, piece] = now[1] - start[1]
-        trail[4, piece] = now[0] - end[0]
-        trail[5, piece] = now[1] - end[1]
-    trail_motion(trail)
+class World(NamedTuple):
+    """The period's world for :func:`control`."""
+
+    t: float                # s, mission time
+    period: float           # s
+    step: int               # the period's number
+    truth: bool             # the robots know the truth (own, seen and reports are it)
+    seed: int
+    det_noise: float        # m, detection noise (firmware_sim.world_step.detect)
+    det_dropout: float
+    query: float            # m, the reports' positions looked at round each robot
+    reach: float            # m, the farthest a robot moves in a period
 
 
-def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np.ndarray,
-                   view: np.ndarray, path: np.ndarray, mem_f: np.ndarray,
-                   mem_i: np.ndarray, held: np.ndarray,
-                   offsets: np.ndarray,
-                   motion: np.ndarray, t: float, obs: np.ndarray, p: LawParams,
-                   period: float, sensing_range: float, a: float, reach: float, cap: int,
-                   watch_cap: int, world_i: np.ndarray, world_f: np.ndarray,
-                   sorted_seen: np.ndarray, seen_grid: Grid, sorted_xy: np.ndarray,
-                   grid: Grid, obs_grid: Grid, outs: tuple[np.ndarray, ...]
-                   ) -> tuple[int, int]:
+def load_memory(rec: np.void) -> Memory:
+    """A robot's :class:`agent.period.Memory` from its MEMORY record."""
+    return Memory(LawMemory(rec["prev_ex"], rec["prev_ey"], rec["has_prev"], rec["avoiding"],
+                            rec["side"], rec["center_x"], rec["center_y"], rec["radius"],
+                            rec["wheel_r"], rec["wheel_l"], rec["passing"]),
+                  Exchange(rec["slot"], rec["partner"], rec["other"], rec["giving"],
+                           rec["since"]))
+
+
+def store_memory(rec: np.void, mem: Memory) -> None:
+    """Write ``mem`` into a MEMORY record (:func:`load_memory`)."""
+    law, ex = mem.law, mem.exchange
+    rec["prev_ex"], rec["prev_ey"] = law.prev_ex, law.prev_ey
+    rec["has_prev"], rec["avoiding"], rec["side"] = law.has_prev, law.avoiding, law.side
+    rec["center_x"], rec["center_y"], rec["radius"] = law.center_x, law.center_y, law.radius
+    rec["wheel_r"], rec["wheel_l"], rec["passing"] = law.wheel_r, law.wheel_l, law.passing
+    rec["slot"], rec["partner"], rec["other"] = ex.slot, ex.partner, ex.other
+    rec["giving"], rec["since"] = ex.giving, ex.since
+
+
+def workspace(cap: int) -> Workspace:
+    """Scratch columns for robot_period among ``cap`` reports and ``cap`` detections."""
+    splits = np.zeros((SPLIT_ROWS, SPLITS))
+    return Workspace(np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap),
+                     np.empty(cap, np.int64), np.empty(2 * cap), np.empty(2 * cap),
+                     np.empty(2 * cap), np.empty(cap, np.int64), np.empty(cap, np.int64),
+                     np.empty(cap), np.empty(cap, np.int64),
+                     Splits(splits[0], splits[1], splits[2], splits[3], splits[4], splits[5],
+                            splits[6], splits[7], splits[8], splits[9]),
+                     np.full(2 * SPLITS, -1, np.int64), np.empty(cap, np.int64))
+
+
+def _control_range(lo: int, hi: int, pose: np.ndarray, s: SwarmState, reports: Reports,
+                   out: Outputs, places: Places, obs: np.ndarray, law: LawParams,
+                   model: NeighbourModel, sensing_range: float, w: World,
+                   sorted_seen: np.ndarray, seen_grid: Grid, sorted_xy: np.ndarray, grid: Grid,
+                   obs_grid: Grid, cap: int, watch_cap: int) -> tuple[int, int]:
     """:func:`control` for robots lo..hi - 1: returns (capacity, watch capacity) needed."""
-    out_cmd, out_ref, out_mem_f, out_mem_i, out_held, out_near, watch_j, watch_k = outs
-    truth, seed, step = world_i[0] != 0, world_i[1], world_i[2]
-    det_noise, det_dropout = world_f[0], world_f[1]
-    staleness, stop_time, top_speed = world_f[2], world_f[3], world_f[4]
-    ring = len(path)                    # periods of the robots' own path kept
-    wheel_top = TWO_PI * p.wheel_radius * p.speed_limit    # m/s, each wheel's ground speed
-    lag = period + p.latency          # s, how late the wheels follow a reported command
+    p = PeriodParams(law, model, sensing_range)
+    a = model.a
     need, need_watch = 0, 0
     max_r = obs[:, 2].max() if len(obs) else 0.0
     nbr_x, nbr_y, nbr_d = np.empty(cap), np.empty(cap), np.empty(cap)
     nbr_j = np.empty(cap, np.int64)
-    nbr_h = np.empty(cap)
-    nbr_g = np.empty(cap)             # m, each neighbour's governor disc beyond a
-    nbr_s, nbr_p, nbr_o = (np.empty(cap, np.int64), np.empty(cap, np.int64),
-                           np.empty(cap, np.int64))   # their slot, partner, other
     o_x, o_y, o_r = np.empty(cap), np.empty(cap), np.empty(cap)
     o_k = np.empty(cap, np.int64)
-    c_floor, c_q = np.empty(cap), np.empty(cap, np.int64)   # the neighbours with a disc
-    trail = np.empty((TRAIL_ROWS, SPLITS))    # agent.governor.neighbour_radii's own motion
+    ws = workspace(cap)
+    size = len(s.path_t)
     for i in range(lo, hi):
-        x, y = own[i, 0], own[i, 1]
-        m = sense_neighbours(i, x, y, sorted_seen, sensing_range, seen_grid, cap, nbr_x,
-                             nbr_y, nbr_d, nbr_j)
+        x, y = s.own[i, 0], s.own[i, 1]
+        # the reports that may put a robot in range, and the obstacles in range, detected
+        m = sense_neighbours(i, x, y, sorted_seen, w.query, seen_grid, cap, nbr_x, nbr_y,
+                             nbr_d, nbr_j)
         k = sense_obstacles(x, y, obs, sensing_range, max_r, obs_grid, cap, o_x, o_y, o_r,
                             o_k)
         need = max(need, m, k)
         if m > cap or k > cap:
             continue
-        if not truth:
-            k = detect(i, step, seed, det_noise, det_dropout, k, o_x, o_y, o_r, o_k)
-        mem = LawMemory(mem_f[i, 0], mem_f[i, 1], mem_i[i, 0] != 0, mem_i[i, 1] != 0,
-                        mem_i[i, 2], mem_f[i, 2], mem_f[i, 3], mem_f[i, 4], mem_f[i, 5],
-                        mem_f[i, 6], mem_i[i, 3])
-        # the governor's limits among its hazards: the detected obstacles, and neighbours
-        # where they can be by now given their data's age; all grown by the robot's own
-        # position uncertainty (own[:, 3], with a pose source). The nearest neighbours
-        # first, by a bound of the free distance toward their discs; a disc is computed
-        # only where it can bind or the law can pass the neighbour (as
-        # agent.node.Agent._limits). None with the governor off
-        nbr_g[:m] = 0.0
-        limits = NO_GAPS
-        if p.governor:
-            grow = own[i, 3] if own.shape[1] > 3 else 0.0
-            v_now, u_now = last_velocity(mem, p)
-            frame = governor_frame(own[i, 2], v_now, u_now, p, period)
-            gaps = NO_GAPS
-            for q in range(k):
-                gaps = fold_hazard(gaps, frame, o_x[q] - x, o_y[q] - y, o_r[q] + a + grow,
-                                   -math.inf, 0.0)
-            n_c = 0
-            walked_age, walked = math.nan, 0.0
-            for q in range(m):
-                j = nbr_j[q]
-                if not truth and seen[j, 2] == NONE:
-                    continue
-                age = t - view[j, 5]
-                if age != walked_age:     # this robot's path since: own_motion's first
-                    walked_age = age
-                    walked = (path[step % ring, i, 2]
-                              - path[at_or_before(step, age, period, ring), i, 2])
-                floor, top = neighbour_floor(x - view[j, 0], y - view[j, 1], view[j, 3], age,
-                                             walked, a, p.accel, top_speed, staleness,
-                                             p.speed_up, lag)
-                floor -= 0.5 * grow
-                # in order of the floor (insertion: a few neighbours, no allocation)
-                c = n_c
-                while c > 0 and c_floor[c - 1] > floor:
-                    c_floor[c], c_q[c] = c_floor[c - 1], c_q[c - 1]
-                    c -= 1
-                c_floor[c], c_q[c] = floor, q
-                nbr_g[q] = top + grow - a
-                n_c += 1
-            trails_age = math.nan
-            bind = binding(gaps, frame)
-            for c in range(n_c):
-                q = c_q[c]
-                j = nbr_j[q]
-                if c_floor[c] >= bind:      # it cannot bind: is it one the law may pass?
-                    dx, dy = nbr_x[q] - x, nbr_y[q] - y
-                    if not may_pass(math.sqrt(dx * dx + dy * dy), nbr_g[q], p):
-                        continue
-                age = t - view[j, 5]
-                if age != trails_age:       # neighbours heard in the same period share it
-                    trails_age = age
-                    own_motion(path, step, i, age, period, trail)
-                full, half, east, north, claim = neighbour_radii(
-                    x - view[j, 0], y - view[j, 1], view[j, 2], view[j, 3], view[j, 4], age,
-                    trail, a, p.accel, 0.5 * p.wheel_base, top_speed, staleness, stop_time,
-                    wheel_top, p.speed_up, lag, p.turn_up)
-                gaps = fold_hazard(gaps, frame, view[j, 0] + east - x, view[j, 1] + north - y,
-                                   full + grow, half + grow, 1.0 if age <= staleness else 0.0)
-                bind = binding(gaps, frame)
-                nbr_g[q] = claim + grow - a
-            limits = frame_limits(gaps, frame)
-        if not truth:
-            # stale neighbours become static obstacles; unheard ones are unknown
-            fresh = 0
-            for q in range(m):
-                status = seen[nbr_j[q], 2]
-                if status == STALE:
-                    if k < cap:
-                        j = nbr_j[q]
-                        o_x[k], o_y[k], o_k[k] = nbr_x[q], nbr_y[q], -1
-                        o_r[k] = silent_radius(view[j, 3], 0.5 * view[j, 4] * p.wheel_base,
-                                               a, p.accel, top_speed, staleness,
-                                               stop_time, wheel_top, p.speed_up, lag,
-                                               p.turn_up)
-                    k += 1
-                elif status == FRESH:
-                    nbr_x[fresh], nbr_y[fresh], nbr_j[fresh] = nbr_x[q], nbr_y[q], nbr_j[q]
-                    nbr_g[fresh] = nbr_g[q]
-                    fresh += 1
-            m = fresh
-            need = max(need, k)
-            if k > cap:
-                continue
-        ex = Exchange(mem_i[i, PLACE], mem_i[i, PLACE + 1], mem_i[i, PLACE + 2],
-                      mem_i[i, PLACE + 3] != 0, mem_f[i, PLACE_SINCE])
-        if p.exchange > 0.0:
-            for q in range(m):
-                j = nbr_j[q]
-                nbr_s[q], nbr_p[q], nbr_o[q] = int(view[j, 6]), int(view[j, 7]), int(view[j, 8])
-            was, pal = ex.slot, ex.partner
-            pal_slot, pal_partner, pal_age = NOBODY, NOBODY, math.inf
-            if pal != NOBODY and view[pal, 5] > -math.inf:
-                pal_slot, pal_partner = int(view[pal, 6]), int(view[pal, 7])
-                pal_age = t - view[pal, 5]
-            ex = exchange_step(i, x, y, t, ex, nbr_j[:m], nbr_x[:m], nbr_y[:m], nbr_s[:m],
-                               nbr_p[:m], nbr_o[:m], pal_slot, pal_partner, pal_age,
-                               view[:, 6], offsets, motion, p.exchange, staleness)
-            if ex.slot != was:      # the error's finite difference sees no jump
-                ox, oy = place(offsets, motion, was, t)
-                nx, ny = place(offsets, motion, ex.slot, t)
-                mem = moved_estimate(mem, ox - nx, oy - ny)
-        slot = ex.slot
-        rx, ry, rvx, rvy = reference_point(offsets[slot, 0], offsets[slot, 1], motion[0],
-                                           motion[1], motion[2], motion[3], motion[4], t)
-        # the pairs active last period (per-pair hysteresis); held lists are short
-        for q in range(m):
-            nbr_h[q] = 0.0
-            for w in range(held.shape[1]):
-                if held[i, w] < 0:
-                    break
-                if held[i, w] == nbr_j[q]:
-                    nbr_h[q] = 1.0
-        v, u, mode, allowed, new = law_step(x, y, own[i, 2], rx, ry, rvx, rvy, nbr_x[:m],
-                                            nbr_y[:m], nbr_h[:m], nbr_g[:m], o_x[:k],
-                                            o_y[:k], o_r[:k],
-                                            limits, mem, p, period)
-        out_cmd[i, 0], out_cmd[i, 1], out_cmd[i, 2], out_cmd[i, 3] = v, u, mode, allowed
-        out_ref[i, 0], out_ref[i, 1], out_ref[i, 2], out_ref[i, 3] = rx, ry, rvx, rvy
-        out_mem_f[i, 0], out_mem_f[i, 1] = new.prev_ex, new.prev_ey
-        out_mem_f[i, 2], out_mem_f[i, 3], out_mem_f[i, 4] = (new.center_x, new.center_y,
-                                                             new.radius)
-        out_mem_f[i, 5], out_mem_f[i, 6] = new.wheel_r, new.wheel_l
-        out_mem_i[i, 0], out_mem_i[i, 1], out_mem_i[i, 2] = (int(new.has_prev),
-                                                             int(new.avoiding), new.side)
-        out_mem_i[i, 3] = new.passing
-        out_mem_i[i, PLACE], out_mem_i[i, PLACE + 1] = ex.slot, ex.partner
-        out_mem_i[i, PLACE + 2], out_mem_i[i, PLACE + 3] = ex.other, int(ex.giving)
-        out_mem_f[i, PLACE_SINCE] = ex.since
-        w = 0
-        for q in range(m):
-            dx, dy = nbr_x[q] - x, nbr_y[q] - y
-            if pair_active(dx * dx + dy * dy, nbr_h[q] > 0.5, p.b, p.hysteresis):
-                out_held[i, w] = nbr_j[q]
-                w += 1
-        out_held[i, w] = -1
+        if not w.truth:
+            k = detect(i, w.step, w.seed, w.det_noise, w.det_dropout, k, o_x, o_y, o_r, o_k)
+        held = s.held[i]
+        n_held = 0
+        while held[n_held] >= 0:
+            n_held += 1
+        grow = s.own[i, 3] if s.own.shape[1] > 3 else 0.0
+        inputs = Inputs(Own(i, x, y, s.own[i, 2], grow, s.jump[i, 0], s.jump[i, 1]), w.t, w.t,
+                        w.period, reports, nbr_j, m, Detections(o_x, o_y, o_r, k), places,
+                        OwnPath(s.path_t, s.path[i, 0], s.path[i, 1], s.path[i, 2],
+                                s.path_first, s.path_n, size),
+                        held, n_held)
+        got = robot_period(inputs, load_memory(s.memory[i]), p, ws)
+        cmd = out.cmd[i]
+        cmd[0], cmd[1], cmd[2], cmd[3] = got.v, got.u, got.mode, got.governed
+        cmd[4], cmd[5] = got.right, got.left
+        ref = got.reference
+        out.ref[i, 0], out.ref[i, 1], out.ref[i, 2], out.ref[i, 3] = ref.x, ref.y, ref.vx, ref.vy
+        store_memory(out.memory[i], got.memory)
+        for h in range(got.n_held):
+            out.held[i, h] = ws.held[h]
+        out.held[i, got.n_held] = -1
         # what to watch during the period: around the truth
-        if not truth:
+        if not w.truth:
             x, y = pose[i, 0], pose[i, 1]
             m = sense_neighbours(i, x, y, sorted_xy, sensing_range, grid, cap, nbr_x, nbr_y,
                                  nbr_d, nbr_j)
@@ -403,7 +306,8 @@ def _control_range(lo: int, hi: int, pose: np.ndarray, own: np.ndarray, seen: np
             if m > cap or k > cap:
                 continue
         need_watch = max(need_watch, _watch(i, x, y, m, k, nbr_d, nbr_j, o_x, o_y, o_r, o_k,
-                                            a, reach, watch_cap, out_near, watch_j, watch_k))
+                                            a, w.reach, watch_cap, out.near, out.watch_j,
+                                            out.watch_k))
     return need, need_watch
 
 
@@ -415,68 +319,58 @@ def _sorted(pos: np.ndarray, grid: Grid) -> np.ndarray:
     return out
 
 
-def control(pose: np.ndarray, own: np.ndarray, seen: np.ndarray, view: np.ndarray,
-            path: np.ndarray, mem_f: np.ndarray, mem_i: np.ndarray, held: np.ndarray,
-            offsets: np.ndarray,
-            motion: np.ndarray,
-            t: float, obs: np.ndarray, p: LawParams, period: float, sensing_range: float, a: float,
-            reach: float, cap: int, watch_cap: int, world_i: np.ndarray,
-            world_f: np.ndarray, out_cmd: np.ndarray, out_ref: np.ndarray,
-            out_mem_f: np.ndarray, out_mem_i: np.ndarray, out_held: np.ndarray,
-            out_near: np.ndarray, watch_j: np.ndarray, watch_k: np.ndarray) -> tuple[int, int]:
-    """Sense and run the law for every robot.
+def control(pose: np.ndarray, s: SwarmState, reports: Reports, out: Outputs, places: Places,
+            obs: np.ndarray, p: PeriodParams, w: World, cap: int, watch_cap: int
+            ) -> tuple[int, int]:
+    """Every robot's period (agent.period.robot_period) on what it knows (``s`` and every
+    robot's newest ``reports``, as delivered to all alike), into ``out``; ``pose`` (N, 3)
+    [m, m, rad] the truth, ``places`` the formation's, ``obs`` (K, 3) the obstacles'
+    centres x, y and radii [m].
 
-    pose (N, 3) [m, m, rad] the truth; own (N, 3) the pose each robot believes it has
-    (N, 4 with a pose source: and its position uncertainty [m], which grows every hazard);
-    seen (N, 3) where the robots believe the others are: x, y [m] and NONE, FRESH or STALE
-    (:mod:`firmware_sim.world_step`); view (N, 9) the states they last received from each
-    other (x, y, theta, v, u, stamp [s], slot, partner, other), for the governor's
-    hazards and the place exchange; path (K, N, 3) [m] each robot's believed position x,
-    y and the cumulative path through them, a ring over its last K periods (period number
-    p in row p % K; rows not written yet the start; older data counts K - 1 periods);
-    world_i = (1 when own and seen are the truth and detections exact, seed, period
-    number), world_f = (detection noise [m], detection dropout, staleness [s], stop time
-    of a dead agent [s], top speed [m/s]) (:func:`agent.governor.neighbour_hazard`; a
-    stale neighbour is an obstacle of :func:`agent.governor.silent_radius`). Memory of
-    :class:`LawMemory` and of :class:`agent.exchange.Exchange` as floats (N, MEM_F) and
-    ints (N, MEM_I) (MEM_F); held (N, cap + 1) the indices of the robots each robot's
-    pairs with which were active (:func:`agent.law.pair_active`), -1 ending
-    the list; offsets (N, 2) [m] the formation's places and motion (5,) = centre0 x, y
-    [m], velocity x, y [m/s],
-    omega [rad/s] of the formation; obs (K, 3) = obstacle centre x, y and radius [m].
-    Out: out_cmd (N, 4) = v [m/s], u [rad/s], mode, the speed the governor allowed when it
-    acted [m/s] (inf: it did not); out_ref (N, 4) = p_d, p_d_dot; the new memory and held
-    lists;
-    out_near (N, 2) [m]: the true distance to the nearest neighbour and the smallest
-    clearance to an obstacle in range (inf: none); the watch lists, on the truth:
-    watch_j (N, watch_cap) the robots j > i whose distance is within
-    max(nearest of i, a) + 4 reach (``reach`` [m]: the farthest a robot moves in a period),
-    watch_k (N, watch_cap) the obstacles whose clearance is within the robot's smallest + 2
-    reach; -1 ends a list. Returns the capacities needed: (neighbours or obstacles sensed
-    by one robot, watch list); one above ``cap`` or ``watch_cap`` means the results are
-    incomplete: call again with the capacities returned.
-    """
+    Each robot looks at the reports of the robots ``w.query`` [m] round it by where they
+    put them now (``s.seen``), found through uniform grids (cell lists), and at the
+    obstacles whose surface is within the sensing range; in an imperfect world it detects
+    them with noise and dropout. The watch lists are on the truth: the robots j > i whose
+    distance is within max(nearest of i, a) + 4 reach, the obstacles whose clearance is
+    within the robot's smallest + 2 reach.
+
+    Returns the capacities needed: (reports or obstacles looked at by one robot, watch
+    list); one above ``cap`` or ``watch_cap`` means the results are incomplete: call again
+    with the capacities returned (``s.held`` and ``out.held`` at least cap + 1 wide)."""
     n, k_obs = len(pose), len(obs)
+    sensing_range = p.sensing_range
     grid = build_grid(pose[:, 0], pose[:, 1], sensing_range, 4 * n + 64)
     sorted_xy = _sorted(pose, grid)
-    if world_i[0] != 0:
+    if w.truth:
         seen_grid, sorted_seen = grid, sorted_xy
     else:
-        seen_grid = build_grid(seen[:, 0], seen[:, 1], sensing_range, 4 * n + 64)
-        sorted_seen = _sorted(seen, seen_grid)
+        seen_grid = build_grid(s.seen[:, 0], s.seen[:, 1], sensing_range, 4 * n + 64)
+        sorted_seen = _sorted(s.seen, seen_grid)
     max_r = obs[:, 2].max() if k_obs else 0.0
     obs_grid = build_grid(obs[:, 0], obs[:, 1], sensing_range + max_r, 4 * max(n, k_obs) + 64)
+    return _control_chunks(pose, s, reports, out, places, obs, p.law, p.model, sensing_range,
+                           w, sorted_seen, seen_grid, sorted_xy, grid, obs_grid, cap,
+                           watch_cap)
+
+
+def _control_chunks(pose: np.ndarray, s: SwarmState, reports: Reports, out: Outputs,
+                    places: Places, obs: np.ndarray, law: LawParams, model: NeighbourModel,
+                    sensing_range: float, w: World, sorted_seen: np.ndarray, seen_grid: Grid,
+                    sorted_xy: np.ndarray, grid: Grid, obs_grid: Grid, cap: int,
+                    watch_cap: int) -> tuple[int, int]:
+    """:func:`control`'s robots in chunks, in parallel when compiled. Its arguments are
+    flat records, each an argument: numba passes no record of records, nor one it cannot
+    trace to an argument, into a parallel loop's body."""
+    n = len(pose)
     chunks = min(n, 64)
     need = np.zeros((chunks, 2), np.int64)
-    outs = (out_cmd, out_ref, out_mem_f, out_mem_i, out_held, out_near, watch_j, watch_k)
     for chunk in prange(chunks):
         # the robots of a chunk in a plain function: numba optimises it better than the
         # body of a parallel loop
         need[chunk, 0], need[chunk, 1] = _control_range(
-            chunk * n // chunks, (chunk + 1) * n // chunks, pose, own, seen, view, path, mem_f,
-            mem_i, held, offsets, motion, t, obs, p, period, sensing_range, a, reach, cap,
-            watch_cap, world_i, world_f, sorted_seen, seen_grid, sorted_xy, grid, obs_grid,
-            outs)
+            chunk * n // chunks, (chunk + 1) * n // chunks, pose, s, reports, out, places, obs,
+            law, model, sensing_range, w, sorted_seen, seen_grid, sorted_xy, grid, obs_grid,
+            cap, watch_cap)
     return (need[:, 0].max(), need[:, 1].max()) if chunks else (0, 0)
 
 
@@ -489,9 +383,10 @@ def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, slip: np.ndar
     ``ideal``: the commands (v, u) of ``cmd[0]`` applied exactly (one exact arc from the
     period's start, evaluated at each substep; only at the period's end for robots not
     ``watched``). Otherwise through the wheel drivers: in substep s the drivers follow the
-    commands ``cmd[s - 1]`` (substeps, N, >= 2) (those issued a drive latency earlier),
-    set-points of :func:`wheel_command` (speed limit [rev/s]), wheel speeds ``wheels``
-    (N, 2) (right, left) [rev/s] ramped at ``ramp`` [rev/s^2] and held over each substep;
+    wheel set-points ``cmd[s - 1]`` (substeps, N, 2) [rev/s] (those issued a drive latency
+    earlier), each clamped to the speed limit [rev/s] as a driver clamps its axis, wheel
+    speeds ``wheels`` (N, 2) (right, left) [rev/s] ramped at ``ramp`` [rev/s^2] and held
+    over each substep;
     the wheels turn ``enc`` (N, 2) [rev] further and move the ground by (1 - ``slip``) (N,
     2) of that.
     out_pos (substeps + 1, N, 2): positions at the period's start and after each substep
@@ -512,8 +407,8 @@ def advance(pose: np.ndarray, cmd: np.ndarray, wheels: np.ndarray, slip: np.ndar
             wr, wl = wheels[i, 0], wheels[i, 1]
             grip_r, grip_l = 1.0 - slip[i, 0], 1.0 - slip[i, 1]
             for s in range(1, substeps + 1):
-                target_r, target_l = wheel_command(cmd[s - 1, i, 0], cmd[s - 1, i, 1],
-                                                   wheel_radius, wheel_base, speed_limit)
+                target_r = min(max(cmd[s - 1, i, 0], -speed_limit), speed_limit)
+                target_l = min(max(cmd[s - 1, i, 1], -speed_limit), speed_limit)
                 wr += min(max(target_r - wr, -step), step)
                 wl += min(max(target_l - wl, -step), step)
                 enc[i, 0] += wr * dt

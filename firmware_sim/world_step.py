@@ -16,12 +16,16 @@ receiver keeps the newest state that has arrived (by stamp) and extrapolates it 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from agent.neighbours import extrapolate
 from agent.odometry import odometry_step
 from common.draws import AGE, DETECT, DROPOUT, ENCODER, LOSS, SLIP, loss_step, normal, uniform
+
+if TYPE_CHECKING:
+    from agent.neighbours import Reports
 
 prange = range   # numba.prange when compiled
 
@@ -60,24 +64,36 @@ def publish(step: int, period: float, est: np.ndarray, cmd: np.ndarray, places: 
         arrive[slot, j] = math.inf if lost else step * period + min(max(age, 0.0), longest)
 
 
-def deliver(t: float, hist: np.ndarray, arrive: np.ndarray, view: np.ndarray,
+def deliver(t: float, hist: np.ndarray, arrive: np.ndarray, reports: Reports,
             staleness: float, out_seen: np.ndarray) -> None:
-    """What the robots know of each other at time t [s]: ``view`` (N, 9) holds, per robot,
-    the newest of its states that has arrived (stamp -inf: none yet), updated from the ring
-    of :func:`publish`; ``out_seen`` (N, 3) = the position [m] extrapolated to t and NONE,
-    FRESH or STALE."""
-    for j in prange(view.shape[0]):
-        for h in range(hist.shape[0]):
-            if arrive[h, j] <= t + TIME_EPS and hist[h, j, 5] > view[j, 5]:
-                for c in range(hist.shape[2]):
-                    view[j, c] = hist[h, j, c]
-        if view[j, 5] == -math.inf:
-            out_seen[j, 0], out_seen[j, 1], out_seen[j, 2] = view[j, 0], view[j, 1], NONE
-        else:
-            x, y, stale = extrapolate(view[j, 0], view[j, 1], view[j, 2], view[j, 3],
-                                      view[j, 4], t - view[j, 5], staleness)
-            out_seen[j, 0], out_seen[j, 1] = x, y
-            out_seen[j, 2] = STALE if stale else FRESH
+    """What the robots know of each other at time t [s]: ``reports`` (agent.neighbours
+    .Reports, row j robot j's) hold the newest of each robot's states that has arrived
+    (stamp -inf: none yet), updated from the ring of :func:`publish`; ``out_seen`` (N, 3)
+    = the position [m] its report puts it at by t and NONE, FRESH or STALE."""
+    for j in prange(len(reports.stamp)):
+        # in a function of its own: numba loses the writes a parallel loop's body makes
+        # into the arrays of a record
+        _deliver_to(j, t, hist, arrive, reports, staleness, out_seen)
+
+
+def _deliver_to(j: int, t: float, hist: np.ndarray, arrive: np.ndarray, reports: Reports,
+                staleness: float, out_seen: np.ndarray) -> None:
+    """:func:`deliver` for robot ``j``'s report."""
+    for h in range(hist.shape[0]):
+        if arrive[h, j] <= t + TIME_EPS and hist[h, j, 5] > reports.stamp[j]:
+            reports.x[j], reports.y[j], reports.theta[j] = (hist[h, j, 0], hist[h, j, 1],
+                                                            hist[h, j, 2])
+            reports.v[j], reports.u[j], reports.stamp[j] = (hist[h, j, 3], hist[h, j, 4],
+                                                            hist[h, j, 5])
+            reports.slot[j], reports.partner[j] = int(hist[h, j, 6]), int(hist[h, j, 7])
+            reports.other[j] = int(hist[h, j, 8])
+    if reports.stamp[j] == -math.inf:
+        out_seen[j, 0], out_seen[j, 1], out_seen[j, 2] = reports.x[j], reports.y[j], NONE
+    else:
+        x, y, stale = extrapolate(reports.x[j], reports.y[j], reports.theta[j], reports.v[j],
+                                  reports.u[j], t - reports.stamp[j], staleness)
+        out_seen[j, 0], out_seen[j, 1] = x, y
+        out_seen[j, 2] = STALE if stale else FRESH
 
 
 def slip_update(step: int, period: float, seed: int, sigma: float, slip: np.ndarray) -> None:

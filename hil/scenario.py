@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from agent.config import ControlParams, RobotParams, SpeedEnvelope, speed_envelope
+from agent.config import ControlParams, RobotParams
+from agent.envelope import SpeedEnvelope, speed_envelope
 from agent.formation import Formation, FormationKind, formation_offsets
 from common.schema import ConfigError, TableReader, from_table, load_toml
 from firmware_sim.mocap_sim import MocapParams

@@ -2,10 +2,13 @@
 whether a wall-clock run had the CPU it needed."""
 from __future__ import annotations
 
+import math
 import os
 import socket
 
 import pytest
+
+from agent.params import NeighbourModel
 
 # When a wall-clock swarm run had the machine it needed, so that its liveness (it converges,
 # no failsafe or watchdog trip) says something about the swarm: the share of the CPU a VM's
@@ -75,25 +78,64 @@ def judge_liveness(steal: float | None, missed: float = 0.0) -> None:
                      f"that did not keep time")
 
 
+def model(**changes: float) -> NeighbourModel:
+    """A neighbour model (agent.params.NeighbourModel) for the governor's tests: a = 1 m,
+    half a wheel base 0.4 m, and every other limit none (infinite ramp, speed-up, turn
+    speed-up, top speeds; no lag, no stop time; never silent) unless ``changes`` sets it."""
+    inf = math.inf
+    return NeighbourModel(**{**dict(a=1.0, accel=inf, half_base=0.4, top_speed=inf,
+                                    staleness=inf, stop_time=0.0, wheel_top=inf, speed_up=inf,
+                                    lag=0.0, turn_up=inf), **changes})
+
+
+def sensed(agent, obstacles=None, now=None) -> tuple[list[tuple[float, float]],
+                                                     list[tuple[float, float, float]]]:
+    """What the agent's period takes into account at its pose (agent.period.sense) among
+    what it hears and the ``obstacles`` message, ``now`` (wall time [s], default its
+    clock's): the law's neighbours (x, y) [m] and obstacles (x, y, radius) [m]."""
+    import numpy as np
+
+    import agent.period as period
+    from agent.formation import Places
+    from agent.node import _workspace
+    now = agent.clock.wall() if now is None else now
+    recs = [r for rid, r in agent.swarm.neighbours().items() if rid != agent.s.robot_id]
+    places = agent._places or Places(np.zeros((1, 2)), np.zeros(5))
+    inputs = agent.inputs(agent.pose, recs, obstacles, places, now, 0.0, 0.02)
+    ws = _workspace(len(recs) + inputs.detections.n + 1)
+    n_nbr, n_obs, _ = period.sense(inputs, agent._params, ws)
+    return ([(ws.nbr_x[q], ws.nbr_y[q]) for q in range(n_nbr)],
+            [(ws.obs_x[k], ws.obs_y[k], ws.obs_r[k]) for k in range(n_obs)])
+
+
 def governor_discs(monkeypatch: pytest.MonkeyPatch, agent, obstacles=None, now=None,
                    dt: float = 0.02) -> tuple[list[tuple[float, ...]], dict[int, float]]:
     """The hazards the agent's safety governor folds (agent.governor.fold_hazard) at its
     pose among what it hears and the ``obstacles`` message, ``now`` (wall time [s],
-    default its clock's): (east, north, full, half, moving) per hazard, east and north
-    [m] from the agent, and the claims it hands the law by robot id."""
-    import agent.node as node
+    default its clock's), in its period (agent.period.governor_limits): (east, north,
+    full, half, moving) per hazard, east and north [m] from the agent; and the half radius
+    [m] of the claim of each of the law's neighbours, by robot id."""
+    import numpy as np
+
+    import agent.period as period
+    from agent.formation import Places
+    from agent.node import _workspace
     folded: list[tuple[float, ...]] = []
-    fold = node.fold_hazard
+    fold = period.fold_hazard
 
     def spy(gaps, frame, dx, dy, radius, half, moving):
         folded.append((dx, dy, radius, half, moving))
         return fold(gaps, frame, dx, dy, radius, half, moving)
 
-    monkeypatch.setattr(node, "fold_hazard", spy)
+    monkeypatch.setattr(period, "fold_hazard", spy)
     now = agent.clock.wall() if now is None else now
-    pose, nbrs = agent.pose, agent.swarm.neighbours()
-    near, ox, oy, orad = agent._surroundings(pose, nbrs, obstacles, now)
-    halves: dict[int, float] = {}
-    agent._limits(pose, nbrs, near, ox, oy, orad, now, dt, halves)
-    monkeypatch.setattr(node, "fold_hazard", fold)
-    return folded, halves
+    recs = [r for rid, r in agent.swarm.neighbours().items() if rid != agent.s.robot_id]
+    places = agent._places or Places(np.zeros((1, 2)), np.zeros(5))
+    inputs = agent.inputs(agent.pose, recs, obstacles, places, now, 0.0, dt)
+    ws = _workspace(len(recs) + inputs.detections.n + 1)
+    n_nbr, _, n_cand = period.sense(inputs, agent._params, ws)
+    period.governor_limits(inputs, agent.memory, n_cand, agent._params, ws)
+    monkeypatch.setattr(period, "fold_hazard", fold)
+    a = agent.s.control.a
+    return folded, {recs[ws.nbr_row[q]].msg.robot_id: ws.nbr_grow[q] + a
+                    for q in range(n_nbr)}

@@ -6,23 +6,16 @@
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
+from agent.avoidance import Surroundings
 from agent.config import ControlParams, RobotParams
-from agent.governor import NO_GAPS, fold_hazard, frame_limits
-from agent.law import LawMemory, LawParams, governor_frame, last_velocity, law_step
+from agent.governor import NO_GAPS, Limits, braking_of, fold_hazard, frame_limits, limit_frame
+from agent.law import LawMemory, Reference, last_velocity, law_step
+from agent.params import LawParams
 from firmware_sim import compiled
-
-if TYPE_CHECKING:
-    from typing import TypeAlias
-
-    from agent.avoidance import FloatSeq
-
-    # the law's seven per-neighbour and per-obstacle columns, lists or arrays
-    Columns: TypeAlias = tuple[FloatSeq, FloatSeq, FloatSeq, FloatSeq, FloatSeq, FloatSeq,
-                               FloatSeq]
 
 IMPLS = ("interpreted", "compiled")
 IMPL = "interpreted"
@@ -65,24 +58,26 @@ def step(case: Case, mem: LawMemory | None = None, params: ControlParams | None 
     mem = mem or LawMemory()
     held = case.held if case.held is not None else [float(mem.avoiding)] * len(case.nbrs)
     grow = case.grow if case.grow is not None else [0.0] * len(case.nbrs)
-    columns: Columns = ([q[0] for q in case.nbrs], [q[1] for q in case.nbrs], held, grow,
-                        [o[0] for o in case.obstacles], [o[1] for o in case.obstacles],
-                        [o[2] for o in case.obstacles])
+    around = Surroundings([q[0] for q in case.nbrs], [q[1] for q in case.nbrs], held, grow,
+                          len(case.nbrs), [o[0] for o in case.obstacles],
+                          [o[1] for o in case.obstacles], [o[2] for o in case.obstacles],
+                          len(case.obstacles))
     lp = LawParams.of(params, robot)
     law = law_step
     if IMPL == "compiled":            # arrays, as the batch simulator passes them
         law = compiled.kernels().law_step
-        nx, ny, nh, ng, ox, oy, orad = (np.array(c, dtype=float) for c in columns)
-        columns = (nx, ny, nh, ng, ox, oy, orad)
-    v, u, mode, governed, memory = law(*case.pose, *case.ref, 0.0, 0.0, *columns,
-                                       limits(case, mem, lp, params.period), mem, lp,
-                                       params.period)
-    return Output([v], [u], [mode], memory, governed)
+        nx, ny, nh, ng, ox, oy, orad = (np.array(c, dtype=float) for c in (
+            around.nbr_x, around.nbr_y, around.nbr_held, around.nbr_grow, around.obs_x,
+            around.obs_y, around.obs_r))
+        around = Surroundings(nx, ny, nh, ng, around.n_nbr, ox, oy, orad, around.n_obs)
+    out = law(*case.pose, Reference(*case.ref, 0.0, 0.0), around,
+              limits(case, mem, lp, params.period), mem, lp, params.period)
+    return Output([out.v], [out.u], [out.mode], out.memory, out.governed)
 
 
-def limits(case: Case, mem: LawMemory, lp: LawParams, dt: float) -> tuple[float, float, float]:
+def limits(case: Case, mem: LawMemory, lp: LawParams, dt: float) -> Limits:
     """The governor's limits among ``case``'s hazards, for the robot in ``mem``'s motion."""
-    frame = governor_frame(case.pose[2], *last_velocity(mem, lp), lp, dt)
+    frame = limit_frame(case.pose[2], *last_velocity(mem, lp), braking_of(lp, dt))
     gaps = NO_GAPS
     for hx, hy, full, half, moving in case.hazards:
         gaps = fold_hazard(gaps, frame, hx - case.pose[0], hy - case.pose[1], full, half,

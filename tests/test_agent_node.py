@@ -4,13 +4,14 @@ import math
 import numpy as np
 import pytest
 from fakes import MirrorMotor, SharedSwarm, SwarmView
-from helpers import SimClock, governor_discs
+from helpers import SimClock, governor_discs, model, sensed
 
 from agent.config import ControlParams, RobotParams
-from agent.governor import SPLITS, neighbour_hazard
+from agent.discs import neighbour_hazard
 from agent.loop import FixedRateLoop
 from agent.node import Agent
 from agent.settings import AgentSettings
+from agent.trail import SPLITS, Splits, own_motion
 from common.payloads import MissionMsg, ObstaclesMsg
 from common.vocabulary import AgentMode, Mode, StateFlags
 
@@ -167,14 +168,13 @@ def test_stale_neighbour_is_avoided_as_a_static_obstacle():
     clock.now += 1.0                           # older than the 0.5 s staleness
     a.arm()
     a.set_mode(AgentMode.FORMATION)
-    near, obs_x, obs_y, obs_r = a._surroundings(a.odometry.pose, a.swarm.neighbours(),
-                                                a.swarm.obstacles(), clock.wall())
-    disc = neighbour_hazard(0.0, 0.0, 1.0, 0.0, 1.0, cart.a_max, cart.v_wheel_max, 0.5,
-                            0.1 + cart.drive_latency, math.inf, math.inf, cart.a_up,
-                            0.02 + cart.drive_latency)[0]
+    nbrs, obstacles = sensed(a, a.swarm.obstacles())
+    disc = neighbour_hazard(0.0, 0.0, 1.0, 0.0, model(
+        accel=cart.a_max, top_speed=cart.v_wheel_max, staleness=0.5,
+        stop_time=0.1 + cart.drive_latency, speed_up=cart.a_up,
+        lag=0.02 + cart.drive_latency))[0]
     assert disc == pytest.approx(1.97, abs=0.01)
-    assert near.fresh_x == [] and (obs_x, obs_y) == ([4.0], [0.0])
-    assert obs_r == [pytest.approx(disc - 1.0)]
+    assert nbrs == [] and obstacles == [(4.0, 0.0, pytest.approx(disc - 1.0))]
     dmin = np.inf
     for _ in range(400):
         a.tick()
@@ -264,7 +264,7 @@ def test_runtime_parameters_change_through_set_param_only_when_valid():
     assert agent.param("BS_K_THETA") == 3.0
     assert agent.set_param("BS_K_THETA", 2.5) is None
     assert agent.s.control.K_theta == agent.param("BS_K_THETA") == 2.5
-    assert agent._law_params.K_theta == 2.5                 # the law runs the new gain
+    assert agent._params.law.K_theta == 2.5                 # the law runs the new gain
     assert agent.s.robot == before.robot and agent.s.timeouts == before.timeouts
     settled = agent.s
     for name, value, why in [("BS_K", -1.0, "BS_K = -1 refused: ControlParams.K: must be > 0"),
@@ -335,7 +335,9 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp(monk
     def travel(t: float) -> float:
         return 0.5 * cart.a_max * t ** 2 + cart.a_max * lag ** 2
 
-    paths = agent.trail.splits(stamp, age, SPLITS)[0]
+    moved = Splits(*([0.0] * SPLITS for _ in Splits._fields))
+    own_motion(agent.trail.path(), stamp, age, [-1] * (2 * SPLITS), moved)
+    paths = moved.walked
     pairs = [travel(age * (k + 1) / SPLITS) + paths[k] for k in range(SPLITS)]
     assert pairs[0] == pytest.approx(travel(age / SPLITS) + driven, rel=1e-6)
     assert [h[2] for h in folded] == [-math.inf]
@@ -343,41 +345,34 @@ def test_a_neighbour_s_shared_disc_counts_this_robot_s_path_since_its_stamp(monk
 
 
 def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
-    """The agent hands the law each fresh neighbour's disc width beyond a (A13): the half
+    """The period hands the law each fresh neighbour's disc width beyond a (A13): the half
     radius of its claim, which the governor holds it out of unless it is behind the
     neighbour (then the stop strip's, smaller: A10); none with the governor off."""
-    import agent.node as node
+    import agent.period as period
     cart = RobotParams(wheel_radius=0.0825, wheel_speed_limit=5.79, wheel_ramp=3.86,
                        drive_latency=0.02)
-    seen: list[list[float]] = []
-    halves: list[list[float]] = []
-    claims: list[list[float]] = []
-    law, limits, fold = node.law_step, Agent._limits, node.fold_hazard
+    seen: list[list[float]] = []        # the growth the law was handed, each period
+    discs: list[list] = []              # the discs computed before it
+    pending: list = []
+    law, radii = period.law_step, period.neighbour_radii
 
     def spy_law(*args):
-        seen.append(list(args[10]))                  # nbr_grow
+        around = args[4]
+        seen.append(list(around.nbr_grow[:around.n_nbr]))
+        discs.append(list(pending))
+        pending.clear()
         return law(*args)
 
-    def spy_fold(gaps, frame, dx, dy, radius, half, moving):
-        if moving:                                   # the neighbour's disc
-            halves.append([half])
-        return fold(gaps, frame, dx, dy, radius, half, moving)
+    def spy_radii(*args):
+        disc = radii(*args)
+        pending.append(disc)
+        return disc
 
-    def spy_limits(self, *args):
-        before = len(halves)
-        out = limits(self, *args)
-        if len(halves) == before:                    # its disc could not bind
-            halves.append([])
-        claims.append(list(args[-1].values()))       # the halves it was handed
-        return out
-
-    monkeypatch.setattr(node, "law_step", spy_law)
-    monkeypatch.setattr(node, "fold_hazard", spy_fold)
-    monkeypatch.setattr(Agent, "_limits", spy_limits)
+    monkeypatch.setattr(period, "law_step", spy_law)
+    monkeypatch.setattr(period, "neighbour_radii", spy_radii)
     for governor in (True, False):
         seen.clear()
-        halves.clear()
-        claims.clear()
+        discs.clear()
         clock, net, (agent, other) = make_swarm(
             [(0.0, 0.0, 0.0), (6.0, 0.0, 0.0)], [(30.0, 0.0), (36.0, 0.0)], robot=cart,
             control=ControlParams(governor=governor))
@@ -389,18 +384,19 @@ def test_the_law_passes_each_neighbour_s_governor_disc(monkeypatch):
             agent.tick()
             other.tick()
             clock.now += 0.02
-        assert seen and all(len(g) == 1 for g in seen[1:])
+        mine = seen[0::2], discs[0::2]          # the agent's periods (the other's between)
+        assert mine[0] and all(len(g) == 1 for g in mine[0][1:])
         if governor:
-            assert len(claims) == len(seen)
-            assert [g[0] for g in seen[1:]] == pytest.approx(
-                [c[0] - agent.s.control.a for c in claims[1:]])
-            assert max(g[0] for g in seen[1:]) > 0.0
+            a = agent.s.control.a
+            computed = [(g[0], d[0]) for g, d in zip(*mine) if d]
+            assert len(computed) > len(mine[0]) // 2
+            assert [g for g, _ in computed] == pytest.approx([d.claim - a for _, d in computed])
+            assert max(g for g, _ in computed) > 0.0
             # behind the other robot as it drives off: the strip holds it less
-            pairs = [(h[0], c[0]) for h, c in zip(halves[1:], claims[1:]) if h]
-            assert any(h < c - 1e-6 for h, c in pairs)
-            assert all(h <= c + 1e-9 for h, c in pairs) and len(pairs) > len(claims) // 2
+            assert any(d.half < d.claim - 1e-6 for _, d in computed)
+            assert all(d.half <= d.claim + 1e-9 for _, d in computed)
         else:
-            assert halves == [] and all(g == [0.0] for g in seen[1:])
+            assert all(not d for d in discs) and all(g == [0.0] for g in seen[1:])
 
 
 def test_neighbour_age_is_split_into_stages_and_the_tail_names_the_slow_one():

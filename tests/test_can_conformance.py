@@ -9,7 +9,7 @@ import cantools
 import pytest
 
 from agent.config import ControlParams, RobotParams
-from agent.law import LawParams
+from agent.params import LawParams
 from common.schema import ConfigError
 from firmware_sim.odrive_sim import DriverPair
 from transport.odrive_frames import (

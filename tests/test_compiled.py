@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import model
 
 from agent.config import ControlParams, RobotParams
 from agent.formation import Formation, FormationKind, formation_offsets
@@ -70,12 +71,12 @@ def test_imperfect_world_compiled_equals_interpreted():
 def test_approach_compiled_equals_interpreted():
     """The governor's bound along a neighbour's report, on random inputs, bit for bit (a
     ``** 2`` there once rounded differently interpreted, through pow, than compiled)."""
-    from agent.governor import approach
+    from agent.discs import approach
     rng = np.random.default_rng(1)
     compiled_approach = compiled.kernels().approach
     for _ in range(20000):
         args = (*rng.uniform(-5, 5, 2), *rng.uniform(-4, 4, 3), float(rng.choice([0.0, 0.3])),
-                float(rng.choice([1.0, 25.0])), rng.uniform(0.2, 0.4))
+                model(accel=float(rng.choice([1.0, 25.0])), half_base=rng.uniform(0.2, 0.4)))
         assert approach(*args) == compiled_approach(*args), args
 
 

@@ -6,13 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.config import (
-    CONTROL_PARAMS,
-    ControlParams,
-    RobotParams,
-    speed_envelope,
-)
-from agent.governor import braking_speed
+from agent.braking import braking_speed
+from agent.config import CONTROL_PARAMS, ControlParams, RobotParams
+from agent.envelope import speed_envelope
 from common.schema import ConfigError, add_arguments, fields, from_table, section_from_args
 
 

@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from agent.exchange import HOLD as HOLD_LIMITS
-from agent.exchange import NOBODY, Exchange, exchange_gain, exchange_step
+from agent.exchange import NOBODY, Exchange, Heard, exchange_gain, exchange_step
+from agent.formation import Places
+from agent.neighbours import Reports
 
 OFFSETS = np.array([[4.0, 0.0], [-4.0, 0.0], [0.0, 8.0]])    # places 0, 1, 2 [m]
 MOTION = np.zeros(5)                                          # the places stand still
@@ -13,18 +15,26 @@ STALENESS = 0.5                                               # s
 HOLD = HOLD_LIMITS * STALENESS                                # s, the handshake's hold
 
 
+def reports(rows) -> Reports:
+    """The reports of robots (id, x, y, slot, partner, other), heard at t = 10 s."""
+    rows = list(rows)
+    ints = [[int(r[c]) for r in rows] for c in (0, 3, 4, 5)]
+    return Reports(ints[0], [10.0] * len(rows), [float(r[1]) for r in rows],
+                   [float(r[2]) for r in rows], [0.0] * len(rows), [0.0] * len(rows),
+                   [0.0] * len(rows), ints[1], ints[2], ints[3])
+
+
 def step(me, xy, ex, nbrs, t=10.0, gain_min=1.0, motion=MOTION):
-    """Robot ``me`` at ``xy`` hearing ``nbrs``: (id, x, y, slot, partner, other) rows, the
-    row of its partner (if any) also as the partner's newest state, heard now; the
-    formation moving as ``motion``."""
-    rows = np.array(nbrs, dtype=float).reshape(-1, 6)
-    ints = rows[:, [0, 3, 4, 5]].astype(int)
-    pal = [r for r in ints if r[0] == ex.partner]
-    pal_slot, pal_partner, pal_age = (pal[0][1], pal[0][2], 0.0) if pal else (NOBODY, NOBODY,
-                                                                             math.inf)
-    return exchange_step(me, xy[0], xy[1], t, ex, ints[:, 0], rows[:, 1], rows[:, 2],
-                         ints[:, 1], ints[:, 2], ints[:, 3], pal_slot, pal_partner, pal_age,
-                         rows[:, 3], OFFSETS, motion, gain_min, STALENESS)
+    """Robot ``me`` at ``xy`` hearing ``nbrs``: (id, x, y, slot, partner, other) rows, all
+    fresh and in range, the row of its partner (if any) also as the partner's newest
+    state, heard now; the formation moving as ``motion``."""
+    rep = reports(nbrs)
+    ids = list(rep.robot)
+    pal = ids.index(ex.partner) if ex.partner in ids else -1
+    heard = Heard(rep, list(range(len(nbrs))), rep.x, rep.y, len(nbrs), pal,
+                  0.0 if pal >= 0 else math.inf)
+    return exchange_step(me, xy[0], xy[1], t, ex, heard, Places(OFFSETS, motion), gain_min,
+                         STALENESS)
 
 
 def test_the_gain_is_the_fall_of_the_squared_distances():
@@ -125,9 +135,10 @@ def test_the_partners_newest_state_counts_out_of_range():
     """The asker hears its partner give by the partner's newest state, even one out of
     sensing range (not among the fresh neighbours)."""
     asking = Exchange(0, 1, 1, False, 9.8)
-    ex = exchange_step(0, -4.0, 0.0, 10.0, asking, np.zeros(0, int), np.zeros(0), np.zeros(0),
-                       np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), 0, 0, 0.6,
-                       np.zeros(0), OFFSETS, MOTION, 1.0, STALENESS)
+    far = reports([(1, 40.0, 0.0, 0, 0, 1)])            # robot 1, in place 0, 0.6 s ago
+    heard = Heard(far, [], [], [], 0, 0, 0.6)
+    ex = exchange_step(0, -4.0, 0.0, 10.0, asking, heard, Places(OFFSETS, MOTION), 1.0,
+                       STALENESS)
     assert ex == Exchange(1, NOBODY, NOBODY, False, 10.0)
 
 
@@ -143,3 +154,12 @@ def test_of_two_robots_in_one_place_the_higher_id_takes_the_nearest_free_one():
     heard = [(0, -4.0, 0.0, 0, NOBODY, NOBODY), (2, 0.0, 8.0, 1, NOBODY, NOBODY),
              (3, 9.0, 9.0, 2, NOBODY, NOBODY)]
     assert step(1, (4.0, 0.0), free, heard, gain_min=0.0) == free
+
+
+def test_a_robot_s_own_report_holds_no_place_for_it():
+    """Robot 1's own report (an old one, naming place 1) is passed over: place 1 is free
+    for it to take when robot 0 holds its place 0 too."""
+    free = Exchange(0, NOBODY, NOBODY, False, 5.0)
+    heard = [(0, -4.0, 0.0, 0, NOBODY, NOBODY), (2, 0.0, 8.0, 2, NOBODY, NOBODY),
+             (1, 4.0, 0.0, 1, NOBODY, NOBODY)]                  # its own, from before
+    assert step(1, (4.0, 0.0), free, heard) == Exchange(1, NOBODY, NOBODY, False, 10.0)

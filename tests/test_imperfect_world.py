@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agent.neighbours import Reports
 from common import drivers
 from firmware_sim import world_step
 from firmware_sim.batch import SimOptions, simulate
@@ -205,9 +206,10 @@ def test_delivered_states_arrive_late_and_turn_stale():
     arrives with it."""
     T, delay = 0.02, 0.1
     hist, arrive = np.zeros((8, 1, 9)), np.full((8, 1), np.inf)
-    view, seen = np.zeros((1, 9)), np.zeros((1, 3))
+    view = Reports(np.zeros(1, np.int64), np.full(1, -np.inf), *np.zeros((5, 1)),
+                   *np.zeros((3, 1), np.int64))
+    seen = np.zeros((1, 3))
     places = np.array([[3, 7, 5]])
-    view[0, 5] = -np.inf
     bad, cmd = np.zeros(1, np.int64), np.array([[1.0, 0.0, 0.0]])
     for step in range(30):
         t = step * T
@@ -215,19 +217,19 @@ def test_delivered_states_arrive_late_and_turn_stale():
         if step < 5:
             assert seen[0, 2] == world_step.NONE                      # nothing arrived yet
         else:
-            assert view[0, 5] == pytest.approx(t - delay)             # the newest arrived
+            assert view.stamp[0] == pytest.approx(t - delay)          # the newest arrived
             assert seen[0, :2] == pytest.approx([t, 0.0])             # extrapolated to now
             assert seen[0, 2] == world_step.FRESH
-            assert list(view[0, 6:]) == [3, 7, 5]
+            assert [view.slot[0], view.partner[0], view.other[0]] == [3, 7, 5]
         world_step.publish(step, T, np.array([[t, 0.0, 0.0]]), cmd, places, np.ones(1, bool),
                            0, delay, 0.0, 0.0, 1.0, bad, hist, arrive)
-    last = view[0, 5]
+    last = view.stamp[0]
     for step in range(30, 80):                                        # dead: nothing sent
         world_step.publish(step, T, np.zeros((1, 3)), cmd, places, np.zeros(1, bool), 0,
                            delay, 0.0, 0.0, 1.0, bad, hist, arrive)
         world_step.deliver(step * T, hist, arrive, view, 0.5, seen)
-    assert view[0, 5] == pytest.approx(29 * T)
-    assert last < view[0, 5]
+    assert view.stamp[0] == pytest.approx(29 * T)
+    assert last < view.stamp[0]
     assert seen[0, 2] == world_step.STALE and seen[0, 0] == pytest.approx(29 * T)
 
 

@@ -119,7 +119,7 @@ def test_pair_active_enters_below_b_and_leaves_beyond_b_plus_hysteresis():
 
 
 def test_law_paper_turns_the_deadlock_resolution_off():
-    from agent.law import LawParams
+    from agent.params import LawParams
     on = LawParams.of(ControlParams(sidestep=True, pair_hysteresis=True), None)
     paper = LawParams.of(ControlParams(sidestep=True, pair_hysteresis=True, law="paper"), None)
     assert (on.sidestep, on.pair_hysteresis) == (True, True)
@@ -380,7 +380,7 @@ def test_a_cart_turning_faster_than_it_can_stop_within_its_heading_error_turns_s
     no faster than lets it stop within e_theta at half the ramp (controller.md A15)."""
     from lawcase import Case
 
-    from agent.governor import braking_speed
+    from agent.braking import braking_speed
     from agent.kinematics import body_velocity
 
     cart, params = _cart(), ControlParams()

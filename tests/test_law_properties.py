@@ -11,10 +11,12 @@ from hypothesis import strategies as st
 
 import agent.governor
 import agent.law
+from agent.avoidance import Surroundings
 from agent.config import ControlParams, RobotParams
-from agent.governor import NO_GAPS, fold_hazard, frame_limits
-from agent.kinematics import body_velocity, wheel_command
-from agent.law import LawMemory, LawParams, governor_frame, last_velocity, law_step
+from agent.governor import NO_GAPS, NO_LIMITS, braking_of, fold_hazard, frame_limits, limit_frame
+from agent.kinematics import body_velocity
+from agent.law import LawMemory, Reference, last_velocity, law_step
+from agent.params import LawParams
 from firmware_sim import compiled
 
 P = ControlParams()
@@ -65,7 +67,8 @@ def cases(draw):
 
 
 law_module = SimpleNamespace(**vars(agent.law), **{
-    name: getattr(agent.governor, name) for name in ("fold_hazard", "frame_limits")})
+    name: getattr(agent.governor, name)
+    for name in ("braking_of", "limit_frame", "fold_hazard", "frame_limits")})
 
 
 def run(law, case, columns=list, lp=LP, fns=law_module):
@@ -73,19 +76,27 @@ def run(law, case, columns=list, lp=LP, fns=law_module):
     and agent.governor's functions, or their compiled versions)."""
     pose, ref, *cols, mem = case
     hx, hy, hr, hh, hm = cols[7:]
-    frame = fns.governor_frame(pose[2], *fns.last_velocity(mem, lp), lp, P.period)
+    frame = fns.limit_frame(pose[2], *fns.last_velocity(mem, lp), fns.braking_of(lp, P.period))
     gaps = NO_GAPS
     for h in range(len(hr)):
         gaps = fns.fold_hazard(gaps, frame, hx[h] - pose[0], hy[h] - pose[1], hr[h], hh[h],
                                hm[h])
-    return law(*pose, *ref, 1.0, -0.5, *(columns(c) for c in cols[:7]),
+    nx, ny, held, grow, ox, oy, orad = (columns(c) for c in cols[:7])
+    around = Surroundings(nx, ny, held, grow, len(cols[0]), ox, oy, orad, len(cols[6]))
+    return law(*pose, Reference(ref[0], ref[1], 1.0, -0.5), around,
                fns.frame_limits(gaps, frame), mem, lp, P.period)
+
+
+def nothing() -> Surroundings:
+    """No neighbours, no obstacles."""
+    return Surroundings([], [], [], [], 0, [], [], [], 0)
 
 
 @settings(max_examples=300, deadline=None)
 @given(cases(), st.sampled_from([LP, LP_CART]))
 def test_outputs_finite_and_bounded(case, lp):
-    v, u, mode, governed, mem = run(law_step, case, lp=lp)
+    out = run(law_step, case, lp=lp)
+    v, u, mode, governed, mem = out.v, out.u, out.mode, out.governed, out.memory
     assert math.isfinite(v) and math.isfinite(u)
     # within the bounds, or no farther from them than the wheels' speeds it starts from
     # (the ramp takes time to bring a robot spinning too fast back)
@@ -98,20 +109,23 @@ def test_outputs_finite_and_bounded(case, lp):
     assert math.isfinite(mem.prev_ex) and math.isfinite(mem.prev_ey)
     assert math.isinf(governed) or governed >= 0.0
     # the memory it returns can be fed back in
-    v2, u2, _, _, _ = run(law_step, (*case[:-1], mem), lp=lp)
-    assert math.isfinite(v2) and math.isfinite(u2)
+    again = run(law_step, (*case[:-1], mem), lp=lp)
+    assert math.isfinite(again.v) and math.isfinite(again.u)
 
 
 @settings(max_examples=300, deadline=None)
 @given(cases())
 def test_commands_are_ones_the_wheels_can_follow(case):
     """Within the wheel speed limit, and each wheel within one period's ramp of its last
-    set-point: nothing after the law has to clip."""
+    set-point: nothing after the law has to clip. The set-points are what (v, u) make and
+    what the law remembers."""
     mem = case[-1]
-    v, u, _, _, new = run(law_step, case, lp=LP_CART)
-    right, left = wheel_command(v, u, CART.wheel_radius, CART.wheel_base,
-                                CART.wheel_speed_limit)
-    assert max(abs(right - new.wheel_r), abs(left - new.wheel_l)) < 1e-9
+    out = run(law_step, case, lp=LP_CART)
+    new = out.memory
+    assert (out.right, out.left) == (new.wheel_r, new.wheel_l)
+    v, u = body_velocity(2 * math.pi * out.right, 2 * math.pi * out.left, CART.wheel_radius,
+                         CART.wheel_base)
+    assert (v, u) == (out.v, out.u)
     step = CART.wheel_ramp * P.period + 1e-9
     assert abs(new.wheel_r - mem.wheel_r) <= step and abs(new.wheel_l - mem.wheel_l) <= step
     assert max(abs(new.wheel_r), abs(new.wheel_l)) <= CART.wheel_speed_limit + 1e-9
@@ -124,7 +138,7 @@ def test_the_law_speeds_up_no_faster_than_it_commits_to(case):
     its wheels' half difference grow by at most speed_up x T a period, past zero included;
     slowing down may take the whole ramp."""
     mem = case[-1]
-    v, u, _, _, new = run(law_step, case, lp=LP_SPORTY)
+    new = run(law_step, case, lp=LP_SPORTY).memory
     ground = 2 * math.pi * SPORTY.wheel_radius            # m/s per rev/s
     up = SPORTY.speed_up * P.period + 1e-9
 
@@ -145,13 +159,12 @@ def test_braking_takes_the_whole_ramp_though_speeding_up_does_not():
     standing and asked to go, it gains 2 m/s^2 x T."""
     ground = 2 * math.pi * SPORTY.wheel_radius
     moving = LawMemory(wheel_r=5.0 / ground, wheel_l=5.0 / ground)
-    none: list[float] = []                       # no neighbours, no obstacles
-    args = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, none, none, none, none, none, none, none,
-            NO_GAPS)
-    v, _, _, _, _ = law_step(*args, moving, LP_SPORTY, P.period)
+    here = Reference(0.0, 0.0, 0.0, 0.0)
+    v = law_step(0.0, 0.0, 0.0, here, nothing(), NO_LIMITS, moving, LP_SPORTY, P.period).v
     assert v == pytest.approx(5.0 - SPORTY.a_max * P.period)
-    v, _, _, _, _ = law_step(0.0, 0.0, 0.0, 5.0, 0.0, *args[5:], LawMemory(), LP_SPORTY,
-                             P.period)
+    ahead = Reference(5.0, 0.0, 0.0, 0.0)
+    v = law_step(0.0, 0.0, 0.0, ahead, nothing(), NO_LIMITS, LawMemory(), LP_SPORTY,
+                 P.period).v
     assert v == pytest.approx(SPORTY.speed_up * P.period)
 
 
@@ -167,9 +180,9 @@ def test_compiled_law_equals_the_interpreted_one(case, lp):
 @settings(max_examples=100, deadline=None)
 @given(st.floats(0.0, 1e-12), angle)
 def test_reference_at_the_robot(offset, theta):
-    v, u, _, _, _ = law_step(1.0, 2.0, theta, 1.0 + offset, 2.0, 0.0, 0.0, [], [], [], [], [],
-                             [], [], NO_GAPS, LawMemory(), LP, P.period)
-    assert math.isfinite(u) and abs(v) <= P.K * 1e-12 + 1e-15
+    out = law_step(1.0, 2.0, theta, Reference(1.0 + offset, 2.0, 0.0, 0.0), nothing(),
+                   NO_LIMITS, LawMemory(), LP, P.period)
+    assert math.isfinite(out.u) and abs(out.v) <= P.K * 1e-12 + 1e-15
 
 
 def test_turning_takes_the_ramp_first_unless_the_robot_must_brake():
@@ -179,12 +192,13 @@ def test_turning_takes_the_ramp_first_unless_the_robot_must_brake():
     curve and braking takes the ramp first."""
     step = CART.wheel_ramp * P.period
     mem = LawMemory(wheel_r=2.0, wheel_l=2.0)
-    free = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], NO_GAPS,
-                    mem, LP_CART, P.period)[4]
+    behind = Reference(-10.0, 5.0, 0.0, 0.0)
+    free = law_step(0.0, 0.0, 0.0, behind, nothing(), NO_LIMITS, mem, LP_CART,
+                    P.period).memory
     assert free.wheel_r - free.wheel_l == pytest.approx(2 * step)
-    frame = governor_frame(0.0, *last_velocity(mem, LP_CART), LP_CART, P.period)
+    frame = limit_frame(0.0, *last_velocity(mem, LP_CART), braking_of(LP_CART, P.period))
     ahead = frame_limits(fold_hazard(NO_GAPS, frame, 1.2, 0.0, 1.0, -math.inf, 0.0), frame)
-    braking = law_step(0.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, [], [], [], [], [], [], [], ahead,
-                       mem, LP_CART, P.period)[4]
+    braking = law_step(0.0, 0.0, 0.0, behind, nothing(), ahead, mem, LP_CART,
+                       P.period).memory
     assert braking.wheel_r + braking.wheel_l == pytest.approx(4.0 - 2 * step)
     assert braking.wheel_r == pytest.approx(braking.wheel_l)

@@ -8,7 +8,9 @@
     firmware_sim    simulators and emulated hardware
     hil             command line, launchers, tools
 
-and no cycle between the packages.
+and no cycle between the packages, nor between the files (modules): a module never imports,
+through any chain of imports (lazy ones and those for the type checker included), a module
+that imports it.
 """
 from __future__ import annotations
 
@@ -47,6 +49,37 @@ def package_graph(root: Path, packages: tuple[str, ...] = PACKAGES) -> dict[str,
             for pkg in packages}
 
 
+def module_graph(root: Path, packages: tuple[str, ...] = PACKAGES) -> dict[str, set[str]]:
+    """Module (dotted name) -> the project modules it imports (``from package import
+    module`` naming a module counts as importing it)."""
+    files = {}
+    for pkg in packages:
+        for path in sorted((root / pkg).rglob("*.py")):
+            parts = list(path.relative_to(root).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            files[".".join(parts)] = path
+    graph: dict[str, set[str]] = {}
+    for name, path in files.items():
+        found = set()
+        package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.Import):
+                found |= {alias.name for alias in node.names if alias.name in files}
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    base = ".".join(package[:len(package) - node.level + 1]
+                                    + ([node.module] if node.module else []))
+                for alias in node.names:
+                    if f"{base}.{alias.name}" in files:
+                        found.add(f"{base}.{alias.name}")
+                    elif base in files:
+                        found.add(base)
+        graph[name] = found - {name}
+    return graph
+
+
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Every cycle of ``graph``, each as a path that starts and ends at its least node."""
     found = []
@@ -72,6 +105,7 @@ def violations(root: Path) -> list[str]:
     if "transport" in imported_packages(root / "agent" / "node.py"):
         out.append("agent/node.py imports transport")
     out += ["package cycle " + " -> ".join(c) for c in cycles(graph)]
+    out += ["module cycle " + " -> ".join(c) for c in cycles(module_graph(root))]
     return out
 
 
@@ -118,7 +152,19 @@ def test_the_check_sees_each_kind_of_violation(tmp_path):
     assert violations(root) == [
         "common imports agent", "transport imports agent", "agent/node.py imports transport",
         "package cycle agent -> transport -> agent",
-        "package cycle firmware_sim -> hil -> firmware_sim"]
+        "package cycle firmware_sim -> hil -> firmware_sim",
+        "module cycle firmware_sim.sim -> hil.cli -> firmware_sim.sim"]
+
+
+def test_a_cycle_between_two_files_of_one_package_is_seen(tmp_path):
+    """agent/config.py and agent/law.py importing each other (config lazily, for a
+    function, law for its parameters' type only): a cycle of files."""
+    root = _tree(tmp_path, {
+        "agent/config.py": "def f():\n    from agent.law import step\n",
+        "agent/law.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                        "    from agent import config\n",
+    })
+    assert violations(root) == ["module cycle agent.config -> agent.law -> agent.config"]
 
 
 def test_allowed_imports_pass(tmp_path):

@@ -123,15 +123,13 @@ def test_sitl_plant_holds_the_drivers_ramped_speed_over_each_step_like_the_batch
     start = (1.0, 2.0, 0.5)
     rb = PlantRobot(1, start, drivers)
     plant = _plant([rb], robot)
-    v_cmd, u_cmd = body_velocity(TWO_PI * right, TWO_PI * left, robot.wheel_radius,
-                                 robot.wheel_base)
     pose = np.array([start])
     wheels = np.zeros((1, 2))                               # the batch plant's wheels [rev/s]
     turns = np.zeros((1, 2))                                # the truth's wheel turns [rev]
     dt = 0.005
     for k in range(20):
         plant.step(dt, dt * k, 100.0 + dt * k)
-        advance(pose, np.array([[[v_cmd, u_cmd]]]), wheels, np.zeros((1, 2)), turns, False,
+        advance(pose, np.array([[[right, left]]]), wheels, np.zeros((1, 2)), turns, False,
                 robot.wheel_radius, robot.wheel_base, robot.wheel_speed_limit,
                 robot.wheel_ramp, dt, 1, np.ones(1, bool), np.zeros((2, 1, 2)))
         v, u = body_velocity(TWO_PI * wheels[0, 0], TWO_PI * wheels[0, 1], robot.wheel_radius,

@@ -161,24 +161,25 @@ def test_fixes_keep_a_slipping_robot_on_its_place_and_odometry_alone_drifts():
     assert math.hypot(alone.pose[0] - world.pose[0], alone.pose[1] - world.pose[1]) > 0.15
 
 
-def test_a_fix_moves_the_remembered_error_with_the_estimate():
-    """A fix that moves the estimate moves the law's remembered error by as much
-    (agent.law.moved_estimate): the error's finite difference sees motion only, not the
-    correction (which, divided by a period, would be a heading rate)."""
+def test_a_fix_hands_the_period_the_jump_of_the_estimate():
+    """A fix that moves the estimate is handed to the next period as a jump, which moves
+    the law's remembered error by as much (agent.period.Own, agent.law.moved_estimate):
+    the error's finite difference sees motion only, not the correction (which, divided by
+    a period, would be a heading rate)."""
     clock, _, agent, world, feed = slipping_agent(PoseSettings())
     drive(clock, agent, world, feed, 0.1)
     agent.arm()
     agent.set_mode(AgentMode.FORMATION)
     drive(clock, agent, world, feed, 2.0)
-    before, mem = agent.fusion.update(clock.wall(), agent.odometry.pose), agent.memory
+    before = agent.fusion.update(clock.wall(), agent.odometry.pose)
+    assert agent._jump == (0.0, 0.0)                  # handed to the last period
     x, y, theta = world.pose
     feed.latest = FixMsg(1, 0, clock.wall(), x + 0.3, y - 0.2, theta, 0.005)
     after = agent._estimate(clock.wall())
     assert math.hypot(after[0] - before[0], after[1] - before[1]) > 0.1
-    assert agent.memory.prev_ex - mem.prev_ex == pytest.approx(after[0] - before[0])
-    assert agent.memory.prev_ey - mem.prev_ey == pytest.approx(after[1] - before[1])
-    assert agent._estimate(clock.wall()) == after and agent.memory.prev_ex == pytest.approx(
-        mem.prev_ex + after[0] - before[0])          # the same fix again: no second move
+    assert agent._jump == pytest.approx((after[0] - before[0], after[1] - before[1]))
+    assert agent._estimate(clock.wall()) == after and agent._jump == pytest.approx(
+        (after[0] - before[0], after[1] - before[1]))   # the same fix again: no second jump
 
 
 def test_no_arming_without_a_fix_and_a_stale_fix_brakes_to_a_sticky_hold():

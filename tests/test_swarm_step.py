@@ -9,9 +9,12 @@ from agent.config import RobotParams
 from firmware_sim.swarm_step import advance, build_grid
 
 
-def _advance(pose, v, u, wheels, ideal, robot, dt, substeps, slip=None, enc=None):
+def _advance(pose, first, second, wheels, ideal, robot, dt, substeps, slip=None, enc=None):
+    """The plant over ``substeps`` of ``dt`` [s] on commands held throughout: (v [m/s],
+    u [rad/s]) per robot with the ``ideal`` plant, else the wheels' set-points (right,
+    left) [rev/s]."""
     pos = np.zeros((substeps + 1, len(pose), 2))
-    cmd = np.repeat(np.column_stack([v, u])[None], substeps, axis=0)   # each substep
+    cmd = np.repeat(np.column_stack([first, second])[None], substeps, axis=0)
     slip = np.zeros((len(pose), 2)) if slip is None else slip
     enc = np.zeros((len(pose), 2)) if enc is None else enc
     advance(pose, cmd, wheels, slip, enc, ideal, robot.wheel_radius, robot.wheel_base,
@@ -36,23 +39,33 @@ def test_ideal_plant_turns_on_an_exact_arc():
 def test_wheel_plant_ramps_and_limits():
     robot = RobotParams(wheel_ramp=100.0, wheel_speed_limit=5.0)
     pose, wheels = np.zeros((1, 3)), np.zeros((1, 2))
-    _advance(pose, [50.0], [0.0], wheels, False, robot, 0.01, 1)
+    _advance(pose, [50.0], [50.0], wheels, False, robot, 0.01, 1)
     assert wheels[0] == pytest.approx([1.0, 1.0])                  # 100 rev/s^2 * 0.01 s
     assert pose[0, 0] == pytest.approx(2 * math.pi * robot.wheel_radius * 1.0 * 0.01)
     for _ in range(100):
-        _advance(pose, [50.0], [0.0], wheels, False, robot, 0.01, 1)
+        _advance(pose, [50.0], [50.0], wheels, False, robot, 0.01, 1)
     assert wheels[0] == pytest.approx([5.0, 5.0])                  # velocity limit
     x = pose[0, 0]
-    _advance(pose, [50.0], [0.0], wheels, False, robot, 0.01, 1)
+    _advance(pose, [50.0], [50.0], wheels, False, robot, 0.01, 1)
     assert (pose[0, 0] - x) / 0.01 == pytest.approx(robot.v_wheel_max)
     assert pose[0, 1:] == pytest.approx([0.0, 0.0])
+
+
+def test_each_wheel_is_clamped_to_the_limit_as_its_driver_clamps_it():
+    """The drivers clamp each axis's set-point on its own (firmware_sim.odrive_sim): a
+    set-point pair beyond the limit turns no longer on its curvature."""
+    robot = RobotParams(wheel_ramp=1e6, wheel_speed_limit=5.0)
+    pose, wheels = np.zeros((1, 3)), np.zeros((1, 2))
+    _advance(pose, [8.0], [2.0], wheels, False, robot, 0.01, 1)
+    assert wheels[0] == pytest.approx([5.0, 2.0])
 
 
 def test_slipping_wheels_turn_more_than_the_ground_moves():
     """20 % slip on both wheels: the encoders count every turn, the robot moves 80 %."""
     robot = RobotParams(wheel_ramp=1e6)
     pose, wheels, enc = np.zeros((1, 3)), np.zeros((1, 2)), np.zeros((1, 2))
-    _advance(pose, [1.0], [0.0], wheels, False, robot, 0.01, 10, np.full((1, 2), 0.2), enc)
+    rate = 1.0 / (2 * math.pi * robot.wheel_radius)             # rev/s for 1 m/s
+    _advance(pose, [rate], [rate], wheels, False, robot, 0.01, 10, np.full((1, 2), 0.2), enc)
     turns = 1.0 * 0.1 / (2 * math.pi * robot.wheel_radius)      # 1 m/s for 0.1 s, in rev
     assert enc[0] == pytest.approx([turns, turns])
     assert pose[0] == pytest.approx([0.08, 0.0, 0.0])

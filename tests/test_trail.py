@@ -1,15 +1,36 @@
 """The robot's own motion over the last seconds (agent.trail), which the governor pairs
-with a neighbour's data of that age."""
+with a neighbour's data of that age: an agent's Trail, and the ring the period reads."""
+import bisect
 import math
+import random
 
 import pytest
 
-from agent.trail import Trail
+from agent.trail import (
+    OwnPath,
+    Splits,
+    Trail,
+    at_or_after,
+    at_or_before,
+    own_motion,
+    path_since,
+)
 
 
-def since(trail, t):
+def blank(pieces: int) -> tuple[Splits, list[int]]:
+    """Empty splits of ``pieces`` and a fresh key."""
+    return Splits(*([0.0] * pieces for _ in Splits._fields)), [-1] * (2 * pieces)
+
+
+def splits(path: OwnPath, start: float, span: float, pieces: int) -> Splits:
+    out, key = blank(pieces)
+    own_motion(path, start, span, key, out)
+    return out
+
+
+def since(trail: Trail, t: float) -> float:
     """The path [m] from the position at or before t [s] to the newest."""
-    return trail.splits(t, 0.0, 1)[0][0]
+    return path_since(trail.path(), t)
 
 
 def test_the_path_since_a_time_is_walked_from_the_position_at_or_before_it():
@@ -29,7 +50,7 @@ def test_it_keeps_its_span_and_no_more():
         trail.record(0.01 * k, 0.01 * k, 0.0)
     assert since(trail, 9.99 - 0.5) == pytest.approx(0.5)
     assert since(trail, 9.99 - 0.25) == pytest.approx(0.25)
-    assert len(trail._t) <= 2 * 50 + 2                   # trimmed, not growing
+    assert trail.path().n <= 2 * 50 + 2                  # trimmed, not growing
     # a jump of the estimate (a fix) counts as travel
     trail.record(10.0, 9.99, 3.0)
     assert since(trail, 9.99) == pytest.approx(3.0)
@@ -38,75 +59,69 @@ def test_it_keeps_its_span_and_no_more():
 
 def test_the_splits_of_an_age_give_the_motion_since_each_piece_s_start_and_end():
     trail = Trail(span=1.0)
-    assert trail.splits(0.0, 0.3, 4)[:6] == ([0.0] * 4,) * 6     # nothing recorded yet
+    assert splits(trail.path(), 0.0, 0.3, 4)[:6] == ([0.0] * 4,) * 6   # nothing yet
     for k, (x, y) in enumerate([(0, 0), (3, 4), (3, 4), (6, 8), (6, 0)]):
         trail.record(0.1 * k, x, y)
-    rows = trail.splits(0.05, 0.3, 3)
-    paths, inner, east, north, end_east, end_north = rows[:6]
-    assert paths == [since(trail, 0.05), since(trail, 0.15), since(trail, 0.25)]
-    assert paths == pytest.approx([18.0, 13.0, 13.0])
+    rows = splits(trail.path(), 0.05, 0.3, 3)
+    assert rows.walked == [since(trail, 0.05), since(trail, 0.15), since(trail, 0.25)]
+    assert rows.walked == pytest.approx([18.0, 13.0, 13.0])
     # from the first position at or after each piece's end: 0.2 (3, 4), 0.3 (6, 8), 0.4
-    assert inner == pytest.approx([13.0, 8.0, 0.0])
+    assert rows.walked_end == pytest.approx([13.0, 8.0, 0.0])
     # the newest position (6, 0) less that at each start: (0, 0), (3, 4), (3, 4)
-    assert east == pytest.approx([6.0, 3.0, 3.0])
-    assert north == pytest.approx([0.0, -4.0, -4.0])
+    assert rows.start_x == pytest.approx([6.0, 3.0, 3.0])
+    assert rows.start_y == pytest.approx([0.0, -4.0, -4.0])
     # and at each end: (3, 4), (6, 8), (6, 0)
-    assert end_east == pytest.approx([3.0, 0.0, 0.0])
-    assert end_north == pytest.approx([-4.0, -8.0, 0.0])
-    # what the governor derives (agent.governor.trail_motion): the displacements' lengths,
+    assert rows.end_x == pytest.approx([3.0, 0.0, 0.0])
+    assert rows.end_y == pytest.approx([-4.0, -8.0, 0.0])
+    # what the governor derives (agent.trail.trail_motion): the displacements' lengths,
     # the half minor axis of the ellipse of where the robot was within each piece (5 m
     # walked between foci 5 m apart, (0, 0) and (3, 4), then (3, 4) and (6, 8): a segment;
     # 13 m walked from (3, 4) to (6, 0), foci 5 m apart: 6 m), and whether the next piece
     # dominates (none here: each moved otherwise)
-    assert rows[6] == pytest.approx([6.0, 5.0, 5.0])
-    assert rows[7] == pytest.approx([5.0, 8.0, 0.0])
-    assert rows[8] == pytest.approx([0.0, 0.0, 6.0])
-    assert rows[9] == [0.0, 0.0, 0.0]
-
-
-def test_the_splits_asked_again_are_the_same_until_the_next_record():
-    trail = Trail(span=1.0)
-    trail.record(0.0, 0.0, 0.0)
-    trail.record(0.1, 1.0, 0.0)
-    first = trail.splits(0.0, 0.1, 2)
-    assert trail.splits(0.0, 0.1, 2) is first            # neighbours of one stamp share it
-    assert first[:2] == ([1.0, 1.0], [0.0, 0.0])
-    trail.record(0.2, 3.0, 0.0)
-    assert trail.splits(0.0, 0.1, 2)[:2] == ([3.0, 3.0], [2.0, 2.0])
+    assert rows.start_len == pytest.approx([6.0, 5.0, 5.0])
+    assert rows.end_len == pytest.approx([5.0, 8.0, 0.0])
+    assert rows.bulge == pytest.approx([0.0, 0.0, 6.0])
+    assert rows.dominated == [0.0, 0.0, 0.0]
 
 
 def test_stamps_between_the_same_records_share_their_splits_and_others_do_not():
     """Neighbours stamped at different times whose pieces start and end between the same
-    recorded positions get the same splits (as a trail asked only once gives them); a
-    piece that crosses a record makes other splits."""
-    def walked():
-        trail = Trail(span=1.0)
-        for k in range(6):
-            trail.record(0.02 * k, 0.3 * k, 0.01 * k * k)
-        return trail
-    trail = walked()
-    first = trail.splits(0.0301, 0.0699, 4)
-    shared = trail.splits(0.0312, 0.0688, 4)          # every piece's ends: the same records
-    assert shared is first
-    assert walked().splits(0.0312, 0.0688, 4) == first
-    other = trail.splits(0.0402, 0.0598, 4)            # its first piece starts after 0.04
-    assert other is not first
-    assert other == walked().splits(0.0402, 0.0598, 4) != first
+    recorded positions find the splits already made (the key says so, the splits are left
+    as they are); a piece that crosses a record makes them afresh."""
+    trail = Trail(span=1.0)
+    for k in range(6):
+        trail.record(0.02 * k, 0.3 * k, 0.01 * k * k)
+    path = trail.path()
+    out, key = blank(4)
+    own_motion(path, 0.0301, 0.0699, key, out)
+    first = [list(row) for row in out]
+    out.walked[0] = -1.0                                  # marks a computation
+    own_motion(path, 0.0312, 0.0688, key, out)           # every piece's ends: the same
+    assert out.walked[0] == -1.0
+    own_motion(path, 0.0402, 0.0598, key, out)           # its first piece starts after 0.04
+    assert out.walked[0] != -1.0
+    assert [list(row) for row in out] == [list(row) for row in splits(path, 0.0402,
+                                                                       0.0598, 4)]
+    assert [list(row) for row in splits(path, 0.0312, 0.0688, 4)] == first
+    key[0] = -1                                          # the period starts afresh
+    out.walked[0] = -1.0
+    own_motion(path, 0.0402, 0.0598, key, out)
+    assert out.walked[0] != -1.0
 
 
 def test_path_since_is_the_first_value_of_the_splits_bit_for_bit():
     """The governor's cheap bound takes path_since for every neighbour and the splits only
     for the discs it computes: both must agree exactly, at and between recorded times."""
-    import random
     rng = random.Random(3)
     trail = Trail(1.0)
-    assert trail.path_since(0.0) == trail.splits(0.0, 0.1, 4)[0][0] == 0.0
+    assert path_since(trail.path(), 0.0) == splits(trail.path(), 0.0, 0.1, 4).walked[0] == 0.0
     t = 0.0
     for _ in range(300):
         t += rng.choice((0.01, 0.02, 0.013))
         trail.record(t, rng.uniform(-5, 5), rng.uniform(-5, 5))
         for start in (t - 0.5, t - 0.02, t - rng.uniform(0, 0.7), t, t - 0.013):
-            assert trail.path_since(start) == trail.splits(start, t - start, 4)[0][0]
+            path = trail.path()
+            assert path_since(path, start) == splits(path, start, t - start, 4).walked[0]
 
 
 def test_a_boundary_at_a_recorded_time_takes_that_record_both_ways():
@@ -115,6 +130,40 @@ def test_a_boundary_at_a_recorded_time_takes_that_record_both_ways():
     trail = Trail(span=10.0)
     for k in range(5):
         trail.record(0.25 * k, float(k * k), 0.0)        # path 0, 1, 4, 9, 16
-    rows = trail.splits(0.25, 0.5, 2)                     # boundaries 0.25, 0.5, 0.75
-    assert rows[0] == [15.0, 12.0]                        # since the records at 0.25, 0.5
-    assert rows[1] == [12.0, 7.0]                         # since the records at 0.5, 0.75
+    rows = splits(trail.path(), 0.25, 0.5, 2)             # boundaries 0.25, 0.5, 0.75
+    assert rows.walked == [15.0, 12.0]                    # since the records at 0.25, 0.5
+    assert rows.walked_end == [12.0, 7.0]                 # since the records at 0.5, 0.75
+
+
+def test_the_search_finds_what_a_bisection_finds_on_uneven_times():
+    """at_or_before and at_or_after start where evenly spaced records would put the time
+    and walk from there: on ticks that jitter, stall and burst they find the record a
+    bisection of the times finds (ties within TIME_TOL count as at the time)."""
+    rng = random.Random(5)
+    for _ in range(200):
+        t, times = 0.0, []
+        for _ in range(rng.randint(1, 60)):
+            t += rng.choice((0.02, 0.02 + rng.uniform(-0.01, 0.01), 0.3, 1e-4, 0.0))
+            times.append(t)
+        n = len(times)
+        path = OwnPath(times, [0.0] * n, [0.0] * n, [0.0] * n, 0, n, n)
+        for when in [rng.uniform(-0.1, t + 0.1) for _ in range(20)] + times:
+            before = max(bisect.bisect_right(times, when) - 1, 0)
+            after = min(bisect.bisect_left(times, when), n - 1)
+            assert at_or_before(path, when) == before
+            assert at_or_after(path, when) == after
+
+
+def test_a_ring_reads_as_its_records_oldest_first():
+    """The batch simulator's ring (first record at ``first``, wrapped): the same answers
+    as the same records kept in order."""
+    times = [0.02 * k for k in range(7, 17)]
+    x = [float(k * k) for k in range(10)]
+    walked = [float(k) for k in range(10)]
+    ordered = OwnPath(times, x, [0.0] * 10, walked, 0, 10, 10)
+    shift = 4                                             # stored from index 4 on, wrapped
+    t_r, x_r, y_r, w_r = (col[-shift:] + col[:-shift] for col in (times, x, [0.0] * 10, walked))
+    ring = OwnPath(t_r, x_r, y_r, w_r, shift, 10, 10)
+    for start, span in ((0.15, 0.1), (0.2, 0.12), (0.0, 0.5), (0.33, 0.0)):
+        assert list(splits(ring, start, span, 4)) == list(splits(ordered, start, span, 4))
+        assert path_since(ring, start) == path_since(ordered, start)
