@@ -44,6 +44,7 @@ def extrapolate(x: float, y: float, theta: float, v: float, u: float, age: float
     position and stale when older than ``staleness`` [s]. A negative age (clock skew) is 0."""
     if age > staleness:
         return x, y, True
-    dt = 0.0 if 0.0 > age else age      # max(age, 0.0), cheaper interpreted
-    px, py, _ = arc_step(x, y, theta, v * dt, u * dt)
+    if age <= 0.0:                      # where it was reported: no arc (x + 0 is x)
+        return x, y, False
+    px, py, _ = arc_step(x, y, theta, v * age, u * age)
     return px, py, False
