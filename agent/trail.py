@@ -83,45 +83,22 @@ def trail_motion(s: Splits) -> None:
         s.dominated[k] = 1.0 if path == s.walked_end[k] or same else 0.0
 
 
-def _record(path: OwnPath, i: int) -> int:
-    """The ring's index of the ``i``-th record kept, the oldest 0."""
-    return (path.first + i) % path.size
-
-
 def at_or_before(path: OwnPath, when: float) -> int:
     """The last record (0: the oldest) at or before time ``when`` [s]; the oldest if none
     is. The records are nearly evenly spaced (a robot's ticks), so the search starts where
     the time would lie and walks from there. ``path`` holds a record at least."""
-    last = path.n - 1
-    newest, oldest = path.t[_record(path, last)], path.t[_record(path, 0)]
+    t, first, size, last = path.t, path.first, path.size, path.n - 1
+    newest, oldest = t[(first + last) % size], t[first]
     if when + TIME_TOL >= newest:
         return last
     if when + TIME_TOL < oldest:
         return 0
     i = int((when - oldest) / (newest - oldest) * last)
     i = 0 if i < 0 else (last if i > last else i)
-    while i < last and path.t[_record(path, i + 1)] <= when + TIME_TOL:
+    while i < last and t[(first + i + 1) % size] <= when + TIME_TOL:
         i += 1
-    while i > 0 and path.t[_record(path, i)] > when + TIME_TOL:
+    while i > 0 and t[(first + i) % size] > when + TIME_TOL:
         i -= 1
-    return i
-
-
-def at_or_after(path: OwnPath, when: float) -> int:
-    """The first record at or after time ``when`` [s]; the newest if none is (as
-    :func:`at_or_before`)."""
-    last = path.n - 1
-    newest, oldest = path.t[_record(path, last)], path.t[_record(path, 0)]
-    if when - TIME_TOL > newest:
-        return last
-    if when - TIME_TOL <= oldest:
-        return 0
-    i = int((when - oldest) / (newest - oldest) * last)
-    i = 0 if i < 0 else (last if i > last else i)
-    while i > 0 and path.t[_record(path, i - 1)] >= when - TIME_TOL:
-        i -= 1
-    while i < last and path.t[_record(path, i)] < when - TIME_TOL:
-        i += 1
     return i
 
 
@@ -130,17 +107,20 @@ def path_since(path: OwnPath, start: float) -> float:
     ``start`` [s] (the oldest, if none; 0 before any): :func:`own_motion`'s first value."""
     if path.n == 0:
         return 0.0
-    newest = path.walked[_record(path, path.n - 1)]
-    return newest - path.walked[_record(path, at_or_before(path, start))]
+    first, size = path.first, path.size
+    newest = path.walked[(first + path.n - 1) % size]
+    return newest - path.walked[(first + at_or_before(path, start)) % size]
 
 
 def own_motion(path: OwnPath, start: float, span: float, key: IntBuf, out: Splits) -> None:
     """This robot's motion over each split k of the ``span`` [s] from ``start`` [s] (the
     neighbour's stamp and data age, split evenly into len(out.walked) pieces), into
-    ``out`` (:class:`Splits`, all zero before any record). ``key`` (two ints a split)
-    holds the records the last call used: where this call's are the same, ``out`` holds
-    its motion already and is left as it is (neighbours whose pieces fall between the same
-    records share it). Set ``key[0]`` to -1 to compute afresh."""
+    ``out`` (:class:`Splits`, all zero before any record): from the last record at or
+    before the split's start (the oldest, if none) and from the first at or after its end
+    (the newest, if none) to the newest. ``key`` (two ints a split) holds the records the
+    last call used: where this call's are the same, ``out`` holds its motion already and is
+    left as it is (neighbours whose pieces fall between the same records share it). Set
+    ``key[0]`` to -1 to compute afresh."""
     pieces = len(out.walked)
     if path.n == 0:
         for k in range(pieces):
@@ -149,20 +129,31 @@ def own_motion(path: OwnPath, start: float, span: float, key: IntBuf, out: Split
         trail_motion(out)
         key[0] = -1
         return
+    t, first, size, last = path.t, path.first, path.size, path.n - 1
     same = key[0] >= 0
+    # one search, then forward: the boundaries come in order
+    i = at_or_before(path, start)
     for k in range(pieces):
-        lo = at_or_before(path, start + span * k / pieces)
-        hi = at_or_after(path, start + span * (k + 1) / pieces)
-        if key[2 * k] != lo or key[2 * k + 1] != hi:
+        if k > 0:
+            lo = start + span * k / pieces
+            while i < last and t[(first + i + 1) % size] <= lo + TIME_TOL:
+                i += 1
+        hi = start + span * (k + 1) / pieces - TIME_TOL
+        j = i
+        while j > 0 and t[(first + j - 1) % size] >= hi:
+            j -= 1
+        while j < last and t[(first + j) % size] < hi:
+            j += 1
+        if key[2 * k] != i or key[2 * k + 1] != j:
             same = False
-            key[2 * k], key[2 * k + 1] = lo, hi
+            key[2 * k], key[2 * k + 1] = i, j
     if same:
         return
-    newest = _record(path, path.n - 1)
-    last, x, y = path.walked[newest], path.x[newest], path.y[newest]
+    newest = (first + last) % size
+    walked, x, y = path.walked[newest], path.x[newest], path.y[newest]
     for k in range(pieces):
-        i, j = _record(path, key[2 * k]), _record(path, key[2 * k + 1])
-        out.walked[k], out.walked_end[k] = last - path.walked[i], last - path.walked[j]
+        i, j = (first + key[2 * k]) % size, (first + key[2 * k + 1]) % size
+        out.walked[k], out.walked_end[k] = walked - path.walked[i], walked - path.walked[j]
         out.start_x[k], out.start_y[k] = x - path.x[i], y - path.y[i]
         out.end_x[k], out.end_y[k] = x - path.x[j], y - path.y[j]
     trail_motion(out)

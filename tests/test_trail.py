@@ -10,7 +10,6 @@ from agent.trail import (
     OwnPath,
     Splits,
     Trail,
-    at_or_after,
     at_or_before,
     own_motion,
     path_since,
@@ -136,9 +135,10 @@ def test_a_boundary_at_a_recorded_time_takes_that_record_both_ways():
 
 
 def test_the_search_finds_what_a_bisection_finds_on_uneven_times():
-    """at_or_before and at_or_after start where evenly spaced records would put the time
-    and walk from there: on ticks that jitter, stall and burst they find the record a
-    bisection of the times finds (ties within TIME_TOL count as at the time)."""
+    """at_or_before starts where evenly spaced records would put the time and walks from
+    there, and the splits' boundaries walk on from it: on ticks that jitter, stall and
+    burst (records at one time too) they find the records a bisection of the times finds,
+    the last at or before each piece's start and the first at or after its end."""
     rng = random.Random(5)
     for _ in range(200):
         t, times = 0.0, []
@@ -148,10 +148,13 @@ def test_the_search_finds_what_a_bisection_finds_on_uneven_times():
         n = len(times)
         path = OwnPath(times, [0.0] * n, [0.0] * n, [0.0] * n, 0, n, n)
         for when in [rng.uniform(-0.1, t + 0.1) for _ in range(20)] + times:
-            before = max(bisect.bisect_right(times, when) - 1, 0)
-            after = min(bisect.bisect_left(times, when), n - 1)
-            assert at_or_before(path, when) == before
-            assert at_or_after(path, when) == after
+            assert at_or_before(path, when) == max(bisect.bisect_right(times, when) - 1, 0)
+            span = rng.choice((0.0, 0.013, rng.uniform(0.0, 0.6)))
+            out, key = blank(4)
+            own_motion(path, when, span, key, out)
+            edges = [when + span * k / 4 for k in range(5)]
+            assert key[0::2] == [max(bisect.bisect_right(times, e) - 1, 0) for e in edges[:4]]
+            assert key[1::2] == [min(bisect.bisect_left(times, e), n - 1) for e in edges[1:]]
 
 
 def test_a_ring_reads_as_its_records_oldest_first():
