@@ -1,7 +1,7 @@
 """A delaying TCP relay: a slow network link where the kernel has no netem.
 
-    python -m hil.link_delay --listen HOST:PORT --upstream HOST:PORT --delay-ms N
-                             [--control FILE]
+    python -m tooling.link_delay --listen HOST:PORT --upstream HOST:PORT --delay-ms N
+                                 [--control FILE]        (in tests/, or with it on PYTHONPATH)
 
 Every TCP connection accepted on ``--listen`` is forwarded to ``--upstream``. Each chunk of
 bytes read in either direction is written on ``delay`` seconds after it was read: a one-way
@@ -278,7 +278,7 @@ class _Control:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m hil.link_delay",
+        prog="python -m tooling.link_delay",
         description="Relay TCP connections with a one-way delay in each direction (bytes "
                     "untouched, so TLS passes through). Stop with SIGINT or SIGTERM.")
     ap.add_argument("--listen", required=True, type=lambda t: _host_port(t, 0),

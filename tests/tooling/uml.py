@@ -11,10 +11,11 @@ Used by the tests of the socketcan path and by ``bench/``; needs the Debian pack
 ``user-mode-linux`` and ``kmod`` (and ``can-utils`` for candump).
 
 Debian 12's UML kernel (6.1) cannot boot on recent host kernels with large FPU state
-("ptrace set fp regs failed, errno = 14"). ``python -m hil.uml ensure`` boots the installed
-kernel once and, when it fails that way, fetches a newer UML kernel and the C library it
-needs from Debian testing (on the Debian mirror in this machine's apt sources, see
-:mod:`hil.apt_sources`) into ``.venv/uml`` and points its ELF interpreter at that library
+("ptrace set fp regs failed, errno = 14").
+``PYTHONPATH=tests python -m tooling.uml ensure`` (what ``make test`` runs first) boots the
+installed kernel once and, when it fails that way, fetches a newer UML kernel and the C
+library it needs from Debian testing (on the Debian mirror in this machine's apt sources, see
+:mod:`tooling.apt_sources`) into ``.venv/uml`` and points its ELF interpreter at that library
 with ``patchelf``. The chain is Debian's own: the suite's InRelease is checked with ``gpgv``
 against the archive keyring, the Packages index against the SHA256 InRelease gives, each
 package against the SHA256 in that index.
@@ -37,12 +38,12 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from hil.apt_sources import debian_mirror
+from tooling.apt_sources import debian_mirror
 
 log = logging.getLogger(__name__)
 
 SYSTEM_KERNEL = "linux"
-LOCAL = Path(__file__).resolve().parent.parent / ".venv" / "uml"   # fetched kernel lives here
+LOCAL = Path(__file__).resolve().parents[2] / ".venv" / "uml"   # fetched kernel lives here
 KEYRING = "/usr/share/keyrings/debian-archive-keyring.gpg"     # Debian's debian-archive-keyring
 SUITE = "testing"
 FETCHED_PACKAGES = ("user-mode-linux", "libc6")
@@ -154,7 +155,7 @@ def boots() -> str | None:
 def usable() -> str | None:
     """None when UML is installed and boots here, else why not (one boot, then cached)."""
     reason = available() or boots()
-    return f"{reason}; try: python -m hil.uml ensure" if reason else None
+    return f"{reason}; try: PYTHONPATH=tests python -m tooling.uml ensure" if reason else None
 
 
 def _download(url: str, timeout: float = 300) -> bytes:
@@ -264,8 +265,8 @@ def fetch(dest: Path = LOCAL, suite: str = SUITE, mirror: str | None = None) -> 
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m hil.uml ensure``: make sure a UML kernel that boots here is available."""
-    ap = argparse.ArgumentParser(prog="python -m hil.uml", description=main.__doc__)
+    """``python -m tooling.uml ensure``: make sure a UML kernel that boots here is available."""
+    ap = argparse.ArgumentParser(prog="python -m tooling.uml", description=main.__doc__)
     ap.add_argument("action", choices=["ensure", "check"])
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="uml: %(message)s")
