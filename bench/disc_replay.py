@@ -25,7 +25,7 @@ from firmware_sim import compiled, swarm_step
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
-from hil.robot_profile import load_robot_profile
+from hil.files.robot_profile import load_robot_profile
 
 
 def record(robots: int, periods: int, robot_file: str, delay: float

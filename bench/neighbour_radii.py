@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from agent.config import ControlParams, RobotParams, commitment, disc_args  # noqa: E402
 from agent.governor import SPLITS, neighbour_radii  # noqa: E402
 from agent.trail import straight  # noqa: E402
-from hil.robot_profile import load_robot_profile  # noqa: E402
+from hil.files.robot_profile import load_robot_profile  # noqa: E402
 
 NEIGHBOURS, ROUNDS, REPEATS = 20, 200, 7
 AGES = (0.0, 0.05, 0.2, 0.5)     # s

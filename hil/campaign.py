@@ -44,7 +44,7 @@ RUNS, TIMINGS, SESSIONS, PARQUET, LOCK = ("runs.jsonl", "timings.jsonl", "sessio
 CONNECT_TIMEOUT = 10.0          # s, to reach an existing scheduler
 SCHEDULER = re.compile(r"^(tcp|tls)://\[?[\w.:-]+\]?:\d+$")
 # what the results depend on besides a run's description (recorded per session)
-CODE = ("agent", "firmware_sim", "hil/scenario.py", "hil/families.py", "hil/campaign_run.py")
+CODE = ("agent", "firmware_sim", "hil/files/scenario.py", "hil/families.py", "hil/campaign_run.py")
 
 log = logging.getLogger(__name__)
 

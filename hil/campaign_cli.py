@@ -89,9 +89,10 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
 def replay(args: argparse.Namespace, console: Console) -> int:
     """Write the run's scenario into the run folder and simulate it as ``sim`` does."""
-    from hil import campaign, sim_cli, toml_text
+    from hil import campaign, sim_cli
     from hil.campaign_run import scenario_doc
     from hil.campaign_spec import load_spec
+    from hil.files import toml_text
     if not args.out:
         raise BadInput("--out: required with --replay (the run folder to write)")
     spec = load_spec(args.spec, check_families=False)

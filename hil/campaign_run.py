@@ -96,7 +96,7 @@ def run_one(desc: Mapping[str, Any]) -> dict[str, Any]:
 def _simulate(desc: Mapping[str, Any], key: str) -> dict[str, Any]:
     from firmware_sim.batch import SimOptions, simulate
     from firmware_sim.plant import PlantKind
-    from hil.scenario import parse_scenario
+    from hil.files.scenario import parse_scenario
     doc = scenario_doc(desc)
     sc = parse_scenario(doc, f"run {key}")
     # as sim: a world with wheel slip or encoder noise needs the wheels plant

@@ -23,7 +23,7 @@ A run is a plain description (JSON-able dict); its key is a short hash of its ca
 JSON, so results are cached by what was run. The family generation seed is the run's seed;
 the world seed and the kill draw derive from the seed and the family (or micro case) only,
 so the runs of one scenario under other profiles, world settings or gains are paired.
-Every problem raises :class:`~hil.scenario.ScenarioError` naming the spec file and field.
+Every problem raises :class:`~hil.files.scenario.ScenarioError` naming the spec file and field.
 """
 from __future__ import annotations
 
@@ -41,8 +41,8 @@ import numpy as np
 
 from agent.config import ControlParams
 from common.schema import ConfigError, TableReader, fields, from_table, load_toml
-from hil import toml_text
-from hil.scenario import ScenarioError
+from hil.files import toml_text
+from hil.files.scenario import ScenarioError
 
 TOP_KEYS = {"name", "description", "duration", "seeds", "profiles", "family", "world",
             "mocap", "control"}
@@ -181,7 +181,7 @@ def _seeds(rd: TableReader, value: Any) -> range:
 def _profiles(rd: TableReader, value: Any, base: Path
               ) -> list[tuple[str, Path | None, dict[str, float] | None]]:
     """(name, file, robot table) of each profile; "none": (none, None, None)."""
-    from hil.robot_profile import load_robot_profile
+    from hil.files.robot_profile import load_robot_profile
     items = value if isinstance(value, list) else [value]
     if not items:
         raise rd.fail("profiles", "expected at least one profile (or \"none\")")
@@ -335,7 +335,7 @@ def _check_worlds(combos: list[dict[str, float]], kill_share: float,
                   kill_at: tuple[float, float], where: str) -> None:
     """Check each world combination as a scenario's [world] (with a kill when there are
     kills)."""
-    from hil.scenario import parse_scenario
+    from hil.files.scenario import parse_scenario
     for world in combos:
         table: dict[str, Any] = dict(world)
         if not table and kill_share == 0:

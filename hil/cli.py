@@ -86,8 +86,8 @@ def bad_input() -> tuple[type[Exception], ...]:
     modules that define them are slow to import for a command that does not need them."""
     from common.schema import ConfigError
     from hil.deploy import DeployError
-    from hil.run_folder import RunFolderError
-    from hil.scenario import ScenarioError
+    from hil.files.run_folder import RunFolderError
+    from hil.files.scenario import ScenarioError
     return BadInput, ConfigError, ScenarioError, RunFolderError, DeployError
 
 

@@ -52,8 +52,8 @@ from agent.pose import PoseSettings
 from agent.settings import AgentSettings, SensingSettings
 from common.schema import ConfigError, TableReader, from_table, load_toml, to_toml
 from hil.certs import SwarmCA, write_private
+from hil.files.scenario import load_scenario
 from hil.mocap import MocapSettings
-from hil.scenario import load_scenario
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -4,10 +4,10 @@
 docs/families.md): robots scattered behind a band of obstacles, their formation's reference
 beyond the band and moving away from it, the whole scene turned by a random angle.
 :func:`micro_doc` draws one variation of a micro case (:mod:`hil.micro_cases`). Both return
-the plain dictionary :func:`hil.scenario.parse_scenario` reads, without [control], [robot]
+the plain dictionary :func:`hil.files.scenario.parse_scenario` reads, without [control], [robot]
 or [sim]; the result depends only on the arguments (the seed is mixed with a CRC-32 of the
 family or case, never with Python's ``hash``). Bad arguments raise
-:class:`hil.scenario.ScenarioError` naming ``where`` and the key.
+:class:`hil.files.scenario.ScenarioError` naming ``where`` and the key.
 """
 from __future__ import annotations
 
@@ -20,9 +20,9 @@ import numpy as np
 
 from agent.config import ControlParams
 from agent.formation import FormationKind, formation_offsets
-from hil.assignment import ASSIGN
+from hil.files.assignment import ASSIGN
+from hil.files.scenario import ScenarioError
 from hil.micro_cases import CASES
-from hil.scenario import ScenarioError
 from hil.scene import Scene
 
 FAMILY_KEYS = {"kind", "robots", "spacing", "slots", "field", "speed", "assign"}

@@ -59,14 +59,14 @@ def _typed(text: str) -> Any:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Generate, write, read the file back as a scenario, print what it holds."""
-    from hil import toml_text
     from hil.families import family_doc, micro_doc
-    from hil.scenario import load_scenario
+    from hil.files import toml_text
+    from hil.files.scenario import load_scenario
     if args.seed < 0:
         raise BadInput(f"--seed: expected an integer >= 0, got {args.seed}")
     robot = None
     if args.robot:
-        from hil.robot_profile import load_robot_profile
+        from hil.files.robot_profile import load_robot_profile
         robot = load_robot_profile(args.robot)
     if args.family is not None:
         top = robot.v_wheel_max if robot is not None else math.inf

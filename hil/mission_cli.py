@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     import zenoh
 
     from agent.formation import Formation
-    from hil.scenario import Scenario
+    from hil.files.scenario import Scenario
     from transport.zenoh_link import Keys
 
 REPEATS, REPEAT_PERIOD = 3, 0.2          # late subscribers get the mission too
@@ -34,10 +34,10 @@ def add_parser(sub: Subparsers) -> None:
 def run(args: argparse.Namespace, console: Console) -> int:
     """Wait until every robot of the scenario is alive, then publish its mission; with
     ``[formation] assign = "shortest"``, its places go to the robots by where they report
-    they stand (hil.assignment), not by the scenario's planned starts."""
+    they stand (hil.files.assignment), not by the scenario's planned starts."""
     from common.payloads import MissionMsg
+    from hil.files.scenario import load_scenario
     from hil.processes import wait_until
-    from hil.scenario import load_scenario
     from transport.zenoh_link import Keys, Presence, open_session
     sc = load_scenario(args.scenario)
     session = open_session(zenoh_client(args.config, args.connect), "the mission publisher")
@@ -72,7 +72,7 @@ def _assigned_where_they_stand(session: zenoh.Session, keys: Keys, sc: Scenario,
     import numpy as np
 
     from common.payloads import StateMsg
-    from hil.assignment import assigned
+    from hil.files.assignment import assigned
     from hil.processes import wait_until
     from transport.zenoh_link import Latest
     states = Latest(session, keys.state("*"), StateMsg.decode, time.time)

@@ -121,8 +121,8 @@ def _write_stats(path: str | None, stats: dict[str, Any]) -> None:
 def run_sitl(args: argparse.Namespace, console: Console) -> int:
     """Host the robots of the scenario until SIGINT/SIGTERM."""
     from firmware_sim.plant_process import run_sitl_plant
-    from hil.robot_profile import load_robot_profile
-    from hil.scenario import load_scenario
+    from hil.files.robot_profile import load_robot_profile
+    from hil.files.scenario import load_scenario
     sc = load_scenario(args.scenario)
     if args.robot:
         sc = dataclasses.replace(sc, robot=load_robot_profile(args.robot))
@@ -187,7 +187,7 @@ def run_drivers(args: argparse.Namespace, console: Console) -> int:
 def run_world(args: argparse.Namespace, console: Console) -> int:
     """Move the scenario's robots from their remote drivers until SIGINT/SIGTERM."""
     from firmware_sim.plant_process import run_world as run_remote_world
-    from hil.scenario import load_scenario
+    from hil.files.scenario import load_scenario
     sc = load_scenario(args.scenario)
     conf = zenoh_client(args.zenoh_config, args.zenoh_connect)
     stats = run_remote_world(sc, args.swarm, conf, realtime_priority=args.realtime_priority)

@@ -20,9 +20,9 @@ def add_parser(sub: Subparsers) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Redraw the run's figures from its data; print its metrics if they are readable."""
-    from hil import run_folder
-    from hil.figures import draw_figures
-    from hil.scenario import load_scenario
+    from hil.files import run_folder
+    from hil.files.figures import draw_figures
+    from hil.files.scenario import load_scenario
     folder = Path(args.run)
     sc = load_scenario(folder / run_folder.SCENARIO)
     data = run_folder.read_run(folder)

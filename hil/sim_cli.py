@@ -15,7 +15,7 @@ from hil.console import LazyProgress, summary_table
 from hil.exit_codes import EXIT_OK, EXIT_UNSAFE, BadInput
 
 if TYPE_CHECKING:
-    from hil.scenario import Scenario
+    from hil.files.scenario import Scenario
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -38,10 +38,10 @@ def add_parser(sub: Subparsers) -> None:
 def run(args: argparse.Namespace, console: Console) -> int:
     """Simulate, write the run folder (metrics, data, figures), print the summary."""
     from firmware_sim.batch import SimOptions, simulate
-    from hil import run_folder
-    from hil.figures import draw_figures
-    from hil.robot_profile import load_robot_profile
-    from hil.scenario import load_scenario
+    from hil.files import run_folder
+    from hil.files.figures import draw_figures
+    from hil.files.robot_profile import load_robot_profile
+    from hil.files.scenario import load_scenario
     sc = load_scenario(args.scenario)
     plant = PlantKind(args.plant) if args.plant else sc.plant
     if args.robot:                  # a real robot's limits apply unless --plant says not

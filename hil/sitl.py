@@ -48,11 +48,11 @@ from agent.settings import AgentSettings, SensingSettings, TimeoutSettings
 from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
 from common.vocabulary import StateFlags
+from hil.files.scenario import Scenario
 from hil.host_cpu import busy_share, cpu_times, machine_cores, steal_share
 from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
 from hil.recorder import Recorder
-from hil.scenario import Scenario
 from hil.sitl_launch import (
     LaunchSettings,
     agent_layout,

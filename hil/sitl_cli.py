@@ -95,11 +95,11 @@ def run(args: argparse.Namespace, console: Console) -> int:
     """Check the options, run the swarm, turn its recording into metrics and figures."""
     from agent.settings import near_radius_problem
     from common.schema import ConfigError, section_from_args
-    from hil import run_folder
-    from hil.figures import draw_figures
+    from hil.files import run_folder
+    from hil.files.figures import draw_figures
+    from hil.files.robot_profile import SITL_DEFAULT, load_robot_profile
+    from hil.files.scenario import load_scenario
     from hil.host_cpu import machine_cores
-    from hil.robot_profile import SITL_DEFAULT, load_robot_profile
-    from hil.scenario import load_scenario
     from hil.sim_cli import state_envelope
     from hil.sitl import SitlError, SitlOptions, run_sitl
     from hil.sitl_launch import LaunchSettings

@@ -20,9 +20,9 @@ from agent.progress import TOLERANCE_MARGIN
 from firmware_sim.metrics import RunMetrics
 from firmware_sim.swarm_step import period_summary
 from firmware_sim.world import Obstacles
+from hil.files.run_folder import RunData, finite_or_nan
+from hil.files.scenario import Scenario
 from hil.recorder import read_messages
-from hil.run_folder import RunData, finite_or_nan
-from hil.scenario import Scenario
 
 
 class RecordingError(ValueError):

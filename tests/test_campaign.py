@@ -171,7 +171,7 @@ def test_world_seed_and_kill_depend_on_the_seed_and_family_only(tmp_path, famili
 def test_both_assignments_of_a_scene_meet_the_same_world(tmp_path, families):
     from hil.campaign_run import scenario_doc
     from hil.campaign_spec import load_spec
-    from hil.scenario import parse_scenario
+    from hil.files.scenario import parse_scenario
     spec = load_spec(write_spec(tmp_path, """
 name = "assign"
 seeds = 4
@@ -239,7 +239,7 @@ def test_mocap_goes_to_the_runs_whose_odometry_is_wrong(tmp_path, families):
 def test_a_wrong_field_is_refused_naming_the_file_and_the_field(tmp_path, families, change,
                                                                 field):
     from hil.campaign_spec import load_spec
-    from hil.scenario import ScenarioError
+    from hil.files.scenario import ScenarioError
     old, new = change
     assert old in CROSSED
     path = write_spec(tmp_path, CROSSED.replace(old, new))

@@ -26,10 +26,10 @@ from hil.families import (
     micro_doc,
     micro_scene,
 )
-from hil.robot_profile import load_robot_profile
-from hil.scenario import ScenarioError, load_scenario, parse_scenario
+from hil.files.robot_profile import load_robot_profile
+from hil.files.scenario import ScenarioError, load_scenario, parse_scenario
+from hil.files.toml_text import dumps
 from hil.scene import rot, wrap
-from hil.toml_text import dumps
 
 if sys.version_info >= (3, 11):
     import tomllib

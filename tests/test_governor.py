@@ -37,8 +37,8 @@ from agent.trail import Trail, straight, with_motion
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
-from hil.robot_profile import load_robot_profile
-from hil.scenario import load_scenario
+from hil.files.robot_profile import load_robot_profile
+from hil.files.scenario import load_scenario
 
 A, ACCEL, TOP, STALE, STOP = 1.0, 2.0, 3.0, 0.5, 0.12
 

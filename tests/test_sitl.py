@@ -20,10 +20,10 @@ from helpers import alive, free_port, judge_liveness
 from common.payloads import MissionMsg
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
+from hil.files.robot_profile import load_robot_profile
+from hil.files.run_folder import read_run
+from hil.files.scenario import load_scenario
 from hil.recorder import read_messages
-from hil.robot_profile import load_robot_profile
-from hil.run_folder import read_run
-from hil.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"

@@ -15,7 +15,7 @@ from helpers import alive
 
 from common.payloads import FixMsg
 from firmware_sim.mocap_sim import MocapParams, Outage, SimulatedMocap
-from hil.scenario import ScenarioError, load_scenario
+from hil.files.scenario import ScenarioError, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -405,7 +405,7 @@ at = {at}
 
 
 def _scenario(tmp_path, duration=8.0, world=WORLD, at=2.0):
-    from hil.scenario import load_scenario
+    from hil.files.scenario import load_scenario
     path = tmp_path / "tiny.toml"
     path.write_text(SCENARIO.format(duration=duration, world=world.format(at=at)))
     return path, load_scenario(path)

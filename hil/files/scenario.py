@@ -30,7 +30,7 @@ from common.schema import ConfigError, TableReader, from_table, load_toml
 from firmware_sim.mocap_sim import MocapParams
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles, WorldParams
-from hil.assignment import ASSIGN, assigned
+from hil.files.assignment import ASSIGN, assigned
 
 
 class ScenarioError(ValueError):
@@ -54,7 +54,7 @@ class Scenario:
     source: Path | None = None
     robot_given: bool = False   # the file has a [robot] table (else RobotParams' defaults)
     mocap: MocapParams | None = None   # a simulated motion-capture system
-    assign: str = "listed"      # [formation] assign: how the places were given (hil.assignment)
+    assign: str = "listed"      # [formation] assign: how the places were given (assignment.py)
 
     def envelope(self) -> SpeedEnvelope:
         """What the safety governor allows this scenario's robot (agent.config.
@@ -155,7 +155,7 @@ def parse_scenario(doc: dict[str, Any], where: str, source: Path | None = None) 
 def _formation(rd: TableReader, table: dict, poses: np.ndarray,
                control: ControlParams) -> tuple[Formation, str]:
     """The formation of robots starting at ``poses`` (N, 3), each robot with its listed
-    offset or, with ``assign = "shortest"``, the slot of :mod:`hil.assignment`; and that
+    offset or, with ``assign = "shortest"``, the slot of :mod:`hil.files.assignment`; and that
     ``assign``."""
     rd.only(table, {"kind", "spacing", "center0", "velocity", "omega", "offsets", "assign"},
             "[formation]")

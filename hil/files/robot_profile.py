@@ -20,7 +20,7 @@ from agent.config import RobotParams
 from common.schema import TableReader, from_table, load_toml
 
 TOP_KEYS = {"name", "description", "robot"}
-BUNDLED = Path(__file__).resolve().parents[1] / "robots"     # the repository's profiles
+BUNDLED = Path(__file__).resolve().parents[2] / "robots"     # the repository's profiles
 SITL_DEFAULT = BUNDLED / "cart.toml"     # the robot a SITL runs unless told otherwise
 
 

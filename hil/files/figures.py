@@ -15,7 +15,7 @@ import numpy as np  # noqa: E402
 
 from common.vocabulary import Mode  # noqa: E402
 from firmware_sim.world import Obstacles  # noqa: E402
-from hil.run_folder import RunData  # noqa: E402
+from hil.files.run_folder import RunData  # noqa: E402
 
 FIGURE_FILES = ("x.png", "y.png", "theta.png", "u.png", "v.png", "dmin.png", "xy.png")
 
