@@ -85,9 +85,9 @@ def bad_input() -> tuple[type[Exception], ...]:
     """The errors that mean bad input. Imported only when an error is reported: the
     modules that define them are slow to import for a command that does not need them."""
     from common.schema import ConfigError
-    from hil.deploy import DeployError
     from hil.files.run_folder import RunFolderError
     from hil.files.scenario import ScenarioError
+    from hil.ground.deploy import DeployError
     return BadInput, ConfigError, ScenarioError, RunFolderError, DeployError
 
 

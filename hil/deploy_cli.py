@@ -19,7 +19,7 @@ def add_parser(sub: Subparsers) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Write the bundles of the manifest and say where they are."""
-    from hil.deploy import deploy, load_manifest
+    from hil.ground.deploy import deploy, load_manifest
     bundles = deploy(load_manifest(args.manifest), Path(args.out))
     for name, path in bundles.items():
         console.print(f"{name}: {path}")

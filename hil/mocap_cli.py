@@ -25,7 +25,7 @@ def add_parser(sub: Subparsers) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Bridge until SIGINT/SIGTERM (or --frames), then print the counters."""
-    from hil.mocap import load_mocap_settings, run_bridge
+    from hil.ground.mocap import load_mocap_settings, run_bridge
     settings = load_mocap_settings(args.config)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

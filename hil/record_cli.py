@@ -23,7 +23,7 @@ def add_parser(sub: Subparsers) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Record until SIGINT/SIGTERM or ``--duration``."""
-    from hil.recorder import Recorder
+    from hil.ground.recorder import Recorder
     from transport.zenoh_link import Keys, open_session
     session = open_session(zenoh_client(args.config, args.connect), "the recorder")
     stop = threading.Event()

@@ -49,10 +49,10 @@ from common.payloads import MissionMsg, Received, StateMsg, TruthMsg
 from common.schema import to_toml
 from common.vocabulary import StateFlags
 from hil.files.scenario import Scenario
+from hil.ground.recorder import Recorder
 from hil.host_cpu import busy_share, cpu_times, machine_cores, steal_share
 from hil.mavlink_router import MavlinkRouter
 from hil.processes import Child, Children, wait_until
-from hil.recorder import Recorder
 from hil.sitl_launch import (
     LaunchSettings,
     agent_layout,

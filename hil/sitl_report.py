@@ -22,7 +22,7 @@ from firmware_sim.swarm_step import period_summary
 from firmware_sim.world import Obstacles
 from hil.files.run_folder import RunData, finite_or_nan
 from hil.files.scenario import Scenario
-from hil.recorder import read_messages
+from hil.ground.recorder import read_messages
 
 
 class RecordingError(ValueError):

@@ -30,10 +30,10 @@ from pathlib import Path
 import pytest
 from helpers import judge_liveness
 
-from hil.deploy import REALTIME_PRIORITY, deploy, load_manifest
 from hil.files.scenario import load_scenario
+from hil.ground.deploy import REALTIME_PRIORITY, deploy, load_manifest
+from hil.ground.recorder import read_messages
 from hil.host_cpu import cpu_times, steal_share
-from hil.recorder import read_messages
 from hil.sitl_report import analyse_recording, missed_in
 
 ROOT = Path(__file__).resolve().parent.parent

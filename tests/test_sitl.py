@@ -23,7 +23,7 @@ from firmware_sim.plant import PlantKind
 from hil.files.robot_profile import load_robot_profile
 from hil.files.run_folder import read_run
 from hil.files.scenario import load_scenario
-from hil.recorder import read_messages
+from hil.ground.recorder import read_messages
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"

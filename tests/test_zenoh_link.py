@@ -96,7 +96,7 @@ def test_swarm_link_between_two_agents_and_a_recording(sessions, tmp_path):
     import numpy as np
 
     from common.payloads import MissionMsg, ObstaclesMsg
-    from hil.recorder import Recorder, read_messages
+    from hil.ground.recorder import Recorder, read_messages
     from transport.zenoh_link import SwarmLink
 
     a, b = sessions

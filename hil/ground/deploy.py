@@ -12,7 +12,7 @@ Swarm manifest (TOML, ``version = 1``)::
     [gcs]
     mavlink = "udpout:192.0.2.10:14550"
     [mocap]                          # optional: a motion-capture pose source
-    system = "vicon"                 # hil.mocap.SYSTEMS
+    system = "vicon"                 # hil.ground.mocap.SYSTEMS
     hostname = "192.0.2.20"          # the motion-capture server
     options = []                     # further connect options, key=value
     error = 0.005                    # m, each fix's position error bound
@@ -51,12 +51,12 @@ from pathlib import Path
 from agent.pose import PoseSettings
 from agent.settings import AgentSettings, SensingSettings
 from common.schema import ConfigError, TableReader, from_table, load_toml, to_toml
-from hil.certs import SwarmCA, write_private
 from hil.files.scenario import load_scenario
-from hil.mocap import MocapSettings
+from hil.ground.certs import SwarmCA, write_private
+from hil.ground.mocap import MocapSettings
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PREFIX = "/opt/boundswarm"          # where install.sh puts the venv on a robot
 ETC = "/etc/boundswarm"
 
