@@ -37,7 +37,7 @@ from rich.console import Console
 
 from hil.campaign_spec import CampaignSpec, Run, write_copy
 from hil.exit_codes import BadInput
-from hil.host_cpu import machine_cores
+from hil.sitl.host_cpu import machine_cores
 
 RUNS, TIMINGS, SESSIONS, PARQUET, LOCK = ("runs.jsonl", "timings.jsonl", "sessions.jsonl",
                                           "runs.parquet", ".lock")

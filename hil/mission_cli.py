@@ -37,7 +37,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     they stand (hil.files.assignment), not by the scenario's planned starts."""
     from common.payloads import MissionMsg
     from hil.files.scenario import load_scenario
-    from hil.processes import wait_until
+    from hil.sitl.processes import wait_until
     from transport.zenoh_link import Keys, Presence, open_session
     sc = load_scenario(args.scenario)
     session = open_session(zenoh_client(args.config, args.connect), "the mission publisher")
@@ -73,7 +73,7 @@ def _assigned_where_they_stand(session: zenoh.Session, keys: Keys, sc: Scenario,
 
     from common.payloads import StateMsg
     from hil.files.assignment import assigned
-    from hil.processes import wait_until
+    from hil.sitl.processes import wait_until
     from transport.zenoh_link import Latest
     states = Latest(session, keys.state("*"), StateMsg.decode, time.time)
     try:

@@ -13,11 +13,11 @@ from rich.console import Console
 from hil.cli_options import Subparsers, add_can_options, positive, priority
 from hil.console import summary_table
 from hil.exit_codes import EXIT_LOST, EXIT_NOT_RUN, EXIT_OK, EXIT_UNSAFE, BadInput
-from hil.host_cpu import rt_limit
+from hil.sitl.host_cpu import rt_limit
 
 if TYPE_CHECKING:
     from firmware_sim.world import WorldParams
-    from hil.sitl import SitlRun
+    from hil.sitl.swarm import SitlRun
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -52,7 +52,7 @@ def add_parser(sub: Subparsers) -> None:
                    help="agents take full-rate states only from robots within M metres "
                         "and 5 Hz beacons from the rest (0: every robot at full rate)")
     from common.schema import add_arguments
-    from hil.sitl_launch import LaunchSettings
+    from hil.sitl.launch import LaunchSettings
     add_arguments(p.add_argument_group("data path (the router's process) and age bound"),
                   LaunchSettings)
     p.set_defaults(func=run)
@@ -61,7 +61,7 @@ def add_parser(sub: Subparsers) -> None:
 def sharing_hint(robots: int, cores: int, agents_per_process: int) -> str | None:
     """What to try when data came too old: with a process per robot and more than two
     robots per core, shared processes as the launcher lays them out beyond 8 a core."""
-    from hil.sitl_launch import SHARED_GROUPS, shared_per_process
+    from hil.sitl.launch import SHARED_GROUPS, shared_per_process
     if agents_per_process > 1 or robots <= 2 * cores:
         return None
     per = shared_per_process(robots, cores, SHARED_GROUPS)
@@ -99,11 +99,11 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from hil.files.figures import draw_figures
     from hil.files.robot_profile import SITL_DEFAULT, load_robot_profile
     from hil.files.scenario import load_scenario
-    from hil.host_cpu import machine_cores
     from hil.sim_cli import state_envelope
-    from hil.sitl import SitlError, SitlOptions, run_sitl
-    from hil.sitl_launch import LaunchSettings
-    from hil.sitl_report import analyse_recording
+    from hil.sitl.host_cpu import machine_cores
+    from hil.sitl.launch import LaunchSettings
+    from hil.sitl.report import analyse_recording
+    from hil.sitl.swarm import SitlError, SitlOptions, run_sitl
     sc = load_scenario(args.scenario)
     if args.duration:
         sc = dataclasses.replace(sc, duration=args.duration)
@@ -287,7 +287,7 @@ def recording_check(run: SitlRun) -> dict[str, Any]:
 
 def _sitl_metrics(run: SitlRun, epoch: float, duration: float, wall: float) -> dict[str, Any]:
     """The ``sitl`` block of metrics.json: loops, links, drivers and CPU of every process."""
-    from hil.sitl_report import missed_in
+    from hil.sitl.report import missed_in
     loops = {rid: st["loop"] for rid, st in run.agent_stats.items()}
     mission_misses = {rid: missed_in(lp, epoch, epoch + duration) for rid, lp in loops.items()}
     return {

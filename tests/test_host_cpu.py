@@ -1,7 +1,7 @@
 """The host's stolen CPU share, from /proc/stat readings."""
 from pathlib import Path
 
-from hil.host_cpu import CpuTimes, busy_share, cpu_times, rt_limit, steal_share
+from hil.sitl.host_cpu import CpuTimes, busy_share, cpu_times, rt_limit, steal_share
 
 LINE = "cpu  {user} 0 {system} {idle} 0 0 0 {steal} 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\nintr 1\n"
 

@@ -33,8 +33,8 @@ from helpers import judge_liveness
 from hil.files.scenario import load_scenario
 from hil.ground.deploy import REALTIME_PRIORITY, deploy, load_manifest
 from hil.ground.recorder import read_messages
-from hil.host_cpu import cpu_times, steal_share
-from hil.sitl_report import analyse_recording, missed_in
+from hil.sitl.host_cpu import cpu_times, steal_share
+from hil.sitl.report import analyse_recording, missed_in
 
 ROOT = Path(__file__).resolve().parent.parent
 BIN = str(Path(sys.executable).parent / "boundswarm")

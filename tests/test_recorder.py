@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 from common.payloads import MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg, WheelsMsg
 from common.vocabulary import StateFlags
 from hil.ground.recorder import ENCODERS, Recorder, read_messages
-from hil.processes import wait_until
+from hil.sitl.processes import wait_until
 from transport.zenoh_link import Keys, open_session, session_config
 
 

@@ -172,7 +172,7 @@ def test_sitl_agents_exchange_places_over_their_state_messages(launch, tmp_path)
 
 
 def test_mission_misses_are_the_overruns_between_epoch_and_end():
-    from hil.sitl_report import missed_in
+    from hil.sitl.report import missed_in
     loop = {"overruns": 6, "overrun_events": [[99.5, 1], [100.0, 2], [107.2, 1], [110.1, 2]]}
     assert missed_in(loop, 100.0, 110.0) == 3          # start-up and shut-down left out
     assert missed_in({"overrun_events": []}, 100.0, 110.0) == 0
@@ -189,7 +189,7 @@ def agent_stats(p99: float, tails: dict | None, published: int = 100) -> dict:
 
 
 def test_a_gap_in_the_truth_is_found_with_its_start():
-    from hil.sitl_report import truth_gap
+    from hil.sitl.report import truth_gap
     samples = np.concatenate([np.arange(0.0, 11.2, 0.01), np.arange(19.5, 20.0, 0.01)])
     gap = truth_gap(samples, 20.0)
     assert gap["seconds"] == pytest.approx(19.5 - samples[1119]) and gap["at"] == samples[1119]
@@ -238,7 +238,7 @@ def test_the_governors_share_and_least_speed_come_from_the_agents_counts():
 
 
 def test_missing_states_are_counted_per_robot():
-    from hil.sitl import SitlRun
+    from hil.sitl.swarm import SitlRun
     from hil.sitl_cli import recording_check
     run = SitlRun(agent_stats={1: agent_stats(1.0, None, 100), 2: agent_stats(1.0, None, 50)},
                   recorded={1: 100, 2: 47})
@@ -350,7 +350,7 @@ def test_configs_that_cannot_share_a_process_are_refused_naming_why(tmp_path):
     """Two agent configs in one process need the same loop and session: a different tick
     phase is named; so is a --stats count that does not match the --config count."""
     from common.schema import to_toml
-    from hil.sitl import SitlOptions, agent_settings
+    from hil.sitl.swarm import SitlOptions, agent_settings
     sc = load_scenario(SCENARIOS / "sitl_small.toml")
     paths = []
     for index in (0, 1):
@@ -382,7 +382,7 @@ def test_configs_that_cannot_share_a_process_are_refused_naming_why(tmp_path):
 
 def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
     from agent.settings import AgentSettings
-    from hil.sitl import agent_hosts
+    from hil.sitl.swarm import agent_hosts
     settings = [AgentSettings(robot_id=i, swarm="t", initial_pose=(0.0, 0.0, 0.0),
                               tick_phase=(i % 2) * 0.01) for i in range(1, 10)]
     hosts = agent_hosts(settings, 3, killed={4})
@@ -395,7 +395,7 @@ def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
 def test_the_agents_share_processes_by_default_only_beyond_eight_robots_a_core():
     """(tick groups, agents per process): shared processes tick in four groups, about two
     processes per core, each group's robots split evenly."""
-    from hil.sitl_launch import LaunchSettings, agent_layout
+    from hil.sitl.launch import LaunchSettings, agent_layout
     auto = LaunchSettings()
     assert agent_layout(16, 2, auto) == (1, 1)          # a process per robot, one phase
     assert agent_layout(17, 2, auto) == (4, 5)          # four groups, 4 processes

@@ -8,7 +8,7 @@ from helpers import free_port
 
 from common.payloads import StateMsg
 from common.vocabulary import StateFlags
-from hil.processes import wait_until
+from hil.sitl.processes import wait_until
 from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
 
 

@@ -1,7 +1,7 @@
 """The one-command SITL swarm: router, plant, the agents' processes, recording.
 
 Sequence: start the Zenoh router in a process of its own (loopback endpoint, scouting off;
-hil.sitl_launch), connect to it and start recording; write each robot's agent config and the
+hil.sitl.launch), connect to it and start recording; write each robot's agent config and the
 run manifest; start the plant process(es) (emulated drivers on one CAN bus per robot, robot
 motion, truth and obstacle detections) and wait for truth from every robot; start the agents
 (a process per robot, or per ``agents_per_process`` robots: ``agent_hosts``) and wait for
@@ -50,16 +50,16 @@ from common.schema import to_toml
 from common.vocabulary import StateFlags
 from hil.files.scenario import Scenario
 from hil.ground.recorder import Recorder
-from hil.host_cpu import busy_share, cpu_times, machine_cores, steal_share
-from hil.mavlink_router import MavlinkRouter
-from hil.processes import Child, Children, wait_until
-from hil.sitl_launch import (
+from hil.sitl.host_cpu import busy_share, cpu_times, machine_cores, steal_share
+from hil.sitl.launch import (
     LaunchSettings,
     agent_layout,
     open_launcher_session,
     start_router,
     zenoh_runtime,
 )
+from hil.sitl.mavlink_router import MavlinkRouter
+from hil.sitl.processes import Child, Children, wait_until
 from transport.canbus import DEFAULT_GROUP
 from transport.settings import CanSettings, MavlinkSettings, ZenohSettings
 from transport.zenoh_link import Keys, Latest, Presence
@@ -208,7 +208,7 @@ class _Closable(Protocol):
 
 def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> SitlRun:
     """Run the SITL swarm of ``sc``, recording into ``out``; returns what was seen. The
-    router runs in a process of its own (hil.sitl_launch), ended last; the launcher is a
+    router runs in a process of its own (hil.sitl.launch), ended last; the launcher is a
     client of it. Its processes inherit ZENOH_RUNTIME (the router: its own); the launcher's
     Zenoh takes it too if it has not started yet (the variable is read once per process)."""
     os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)

@@ -18,7 +18,7 @@ import zenoh
 
 from agent.loop import use_normal_scheduling, use_realtime
 from common.schema import setting, validate
-from hil.processes import Child, Children
+from hil.sitl.processes import Child, Children
 from transport.zenoh_link import open_session, session_config
 
 
