@@ -48,9 +48,9 @@ def add_parser(sub: Subparsers) -> None:
 def run(args: argparse.Namespace, console: Console) -> int:
     if args.replay:
         return replay(args, console)
-    from hil import campaign
-    from hil.campaign_report import write_report
-    from hil.campaign_spec import load_spec
+    from hil.campaign import driver
+    from hil.campaign.report import write_report
+    from hil.campaign.spec import load_spec
     source = Path(args.spec)
     if args.out:
         out = Path(args.out)
@@ -61,12 +61,12 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if args.robot and source.is_dir():
         raise BadInput("--robot: a campaign folder runs the profiles it was started with")
     if args.scheduler:
-        campaign.check_scheduler(args.scheduler)
-    if not campaign.dask_available():
+        driver.check_scheduler(args.scheduler)
+    if not driver.dask_available():
         raise RuntimeError("Dask is not installed: pip install 'boundswarm[campaign]'")
     spec = load_spec(source, profiles=args.robot)
-    outcome = campaign.run_campaign(spec, out, console, workers=args.workers,
-                                    scheduler=args.scheduler, retry_failed=args.retry_failed)
+    outcome = driver.run_campaign(spec, out, console, workers=args.workers,
+                                  scheduler=args.scheduler, retry_failed=args.retry_failed)
     report = write_report(spec.name, outcome.rows, out, outcome.total)
     ok = [r for r in outcome.rows if r.get("status") == "ok"]
     safe = 100 * sum(bool(r.get("safe")) for r in ok) / len(ok) if ok else 0.0
@@ -77,7 +77,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
                   f"({outcome.executed} run now, {outcome.failed} failed): safe {safe:.1f} %, "
                   f"converged {conv:.1f} %{speed}")
     if outcome.complete:
-        console.print(f"results: {out / campaign.PARQUET}\nreport:  {report}")
+        console.print(f"results: {out / driver.PARQUET}\nreport:  {report}")
     else:
         console.print(f"[red]{len(outcome.lost)} runs were lost with their workers (first: "
                       f"{outcome.lost[0] if outcome.lost else '-'}); run the command again "
@@ -89,9 +89,10 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
 def replay(args: argparse.Namespace, console: Console) -> int:
     """Write the run's scenario into the run folder and simulate it as ``sim`` does."""
-    from hil import campaign, sim_cli
-    from hil.campaign_run import scenario_doc
-    from hil.campaign_spec import load_spec
+    from hil import sim_cli
+    from hil.campaign import driver
+    from hil.campaign.run import scenario_doc
+    from hil.campaign.spec import load_spec
     from hil.files import toml_text
     if not args.out:
         raise BadInput("--out: required with --replay (the run folder to write)")
@@ -110,7 +111,7 @@ def replay(args: argparse.Namespace, console: Console) -> int:
         scenario=str(scenario), out=str(out), duration=None, plant=None, robot=None,
         substeps=None, record_every=1), console)
     folder = Path(args.spec) if Path(args.spec).is_dir() else None
-    row = campaign.read_rows(folder).get(run_.key) if folder else None
+    row = driver.read_rows(folder).get(run_.key) if folder else None
     if row and row.get("status") == "ok":
         metrics = json.loads((out / "metrics.json").read_text())
         differ = [k for k in COMPARED if metrics.get(k) != row.get(k)]

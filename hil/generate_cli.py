@@ -59,7 +59,7 @@ def _typed(text: str) -> Any:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Generate, write, read the file back as a scenario, print what it holds."""
-    from hil.families import family_doc, micro_doc
+    from hil.campaign.families import family_doc, micro_doc
     from hil.files import toml_text
     from hil.files.scenario import load_scenario
     if args.seed < 0:

@@ -109,7 +109,7 @@ def test_fix_noise_does_not_become_a_heading_rate():
     correction must not enter the error's finite difference (agent.law.moved_estimate).
     It would make a heading rate of tenths of a rad/s, and the governor, braking for the
     turn, would hold the carts behind their slots for the whole run."""
-    from hil.families import family_doc
+    from hil.campaign.families import family_doc
     from hil.files.scenario import parse_scenario
     doc = family_doc({"kind": "line", "robots": 8, "field": "sparse"}, 0, duration=120.0,
                      top_speed=CART.v_wheel_max)

@@ -3,10 +3,10 @@
 :func:`family_doc` draws one scenario of a family (keys in :data:`FAMILY_KEYS`, described in
 docs/families.md): robots scattered behind a band of obstacles, their formation's reference
 beyond the band and moving away from it, the whole scene turned by a random angle.
-:func:`micro_doc` draws one variation of a micro case (:mod:`hil.micro_cases`). Both return
-the plain dictionary :func:`hil.files.scenario.parse_scenario` reads, without [control], [robot]
-or [sim]; the result depends only on the arguments (the seed is mixed with a CRC-32 of the
-family or case, never with Python's ``hash``). Bad arguments raise
+:func:`micro_doc` draws one variation of a micro case (:mod:`hil.campaign.micro_cases`).
+Both return the plain dictionary :func:`hil.files.scenario.parse_scenario` reads, without
+[control], [robot] or [sim]; the result depends only on the arguments (the seed is mixed
+with a CRC-32 of the family or case, never with Python's ``hash``). Bad arguments raise
 :class:`hil.files.scenario.ScenarioError` naming ``where`` and the key.
 """
 from __future__ import annotations
@@ -20,10 +20,10 @@ import numpy as np
 
 from agent.config import ControlParams
 from agent.formation import FormationKind, formation_offsets
+from hil.campaign.micro_cases import CASES
+from hil.campaign.scene import Scene
 from hil.files.assignment import ASSIGN
 from hil.files.scenario import ScenarioError
-from hil.micro_cases import CASES
-from hil.scene import Scene
 
 FAMILY_KEYS = {"kind", "robots", "spacing", "slots", "field", "speed", "assign"}
 NOT_DRAWN = frozenset({"assign"})   # family keys that leave the drawn scene as it is

@@ -87,11 +87,11 @@ def derived_seed(*parts: Any) -> int:
 
 
 def families_module() -> Any:
-    """``hil.families``, imported when first needed."""
+    """``hil.campaign.families``, imported when first needed."""
     try:
-        return importlib.import_module("hil.families")
+        return importlib.import_module("hil.campaign.families")
     except ImportError as exc:
-        raise RuntimeError(f"the scenario families (hil/families.py) cannot be imported: "
+        raise RuntimeError(f"the scenario families (hil/campaign/families.py) cannot be imported: "
                            f"{exc}") from None
 
 
@@ -160,7 +160,7 @@ def parse_spec(doc: dict[str, Any], where: str, base: Path, source: Path | None 
 
 def _drawn(case: Mapping[str, Any]) -> Mapping[str, Any]:
     """The case as far as it is drawn: a family without the keys that leave its scene as
-    it is (``hil.families.NOT_DRAWN``), so that such variants of a scene meet the same
+    it is (``hil.campaign.families.NOT_DRAWN``), so that such variants of a scene meet the same
     world (delays, losses, kill)."""
     family = case.get("family", {})
     kept = {k: v for k, v in family.items() if k not in families_module().NOT_DRAWN}

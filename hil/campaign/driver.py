@@ -35,7 +35,7 @@ from typing import Any, Callable, Iterator
 
 from rich.console import Console
 
-from hil.campaign_spec import CampaignSpec, Run, write_copy
+from hil.campaign.spec import CampaignSpec, Run, write_copy
 from hil.exit_codes import BadInput
 from hil.sitl.host_cpu import machine_cores
 
@@ -44,7 +44,8 @@ RUNS, TIMINGS, SESSIONS, PARQUET, LOCK = ("runs.jsonl", "timings.jsonl", "sessio
 CONNECT_TIMEOUT = 10.0          # s, to reach an existing scheduler
 SCHEDULER = re.compile(r"^(tcp|tls)://\[?[\w.:-]+\]?:\d+$")
 # what the results depend on besides a run's description (recorded per session)
-CODE = ("agent", "firmware_sim", "hil/files/scenario.py", "hil/families.py", "hil/campaign_run.py")
+CODE = ("agent", "firmware_sim", "hil/files/scenario.py", "hil/campaign/families.py",
+        "hil/campaign/run.py")
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +85,7 @@ def check_scheduler(address: str) -> str:
 
 def code_digest(root: Path | None = None) -> str:
     """A short hash of the sources the results depend on (recorded per session)."""
-    root = root or Path(__file__).resolve().parent.parent
+    root = root or Path(__file__).resolve().parents[2]
     digest = hashlib.sha256()
     for name in CODE:
         path = root / name
@@ -223,7 +224,7 @@ def _execute(client: Any, runs: list[Run], in_flight: int,
     died, the scheduler went away)."""
     from distributed import as_completed
 
-    from hil.campaign_run import run_timed
+    from hil.campaign.run import run_timed
     pending = iter(runs)
     inflight: dict[Any, str] = {}          # future -> run key
 
@@ -260,7 +261,7 @@ def _warm_up(client: Any) -> float:
     worker lost meanwhile (restarted by its nanny, starved so long it missed its
     heartbeats) is left out: the runs load the kernels themselves, and Dask gives a lost
     worker's runs to the others."""
-    from hil.campaign_run import warm_up
+    from hil.campaign.run import warm_up
     took = client.run(warm_up, on_error="return")
     return max((t for t in took.values() if isinstance(t, float)), default=0.0)
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from agent.config import ControlParams
 from agent.formation import FormationKind, formation_offsets
-from hil.scene import Scene
+from hil.campaign.scene import Scene
 
 Builder = Callable[[np.random.Generator, ControlParams], tuple[Scene, float]]
 

@@ -1,11 +1,11 @@
 """A generated scenario's geometry, its rotation, and its scenario document (TOML).
 
-A :class:`Scene` holds what :mod:`hil.families` and :mod:`hil.micro_cases` draw: start poses,
-the formation's offsets and motion, and disc obstacles, in metres and radians (world frame,
-formation frame for the offsets). :meth:`Scene.doc` turns it into the plain dictionary that
-:func:`hil.files.scenario.parse_scenario` reads (formation as ``kind = "offsets"``), rounded to
-0.1 mm and 0.1 mrad (rates to 1e-6); :func:`hil.files.toml_text.dumps` writes such a dictionary
-as TOML text.
+A :class:`Scene` holds what :mod:`hil.campaign.families` and :mod:`hil.campaign.micro_cases`
+draw: start poses, the formation's offsets and motion, and disc obstacles, in metres and
+radians (world frame, formation frame for the offsets). :meth:`Scene.doc` turns it into the
+plain dictionary that :func:`hil.files.scenario.parse_scenario` reads (formation as
+``kind = "offsets"``), rounded to 0.1 mm and 0.1 mrad (rates to 1e-6);
+:func:`hil.files.toml_text.dumps` writes such a dictionary as TOML text.
 """
 from __future__ import annotations
 

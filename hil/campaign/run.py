@@ -1,6 +1,6 @@
 """One run of a campaign: its description -> a scenario -> the batch simulator -> one row.
 
-:func:`run_one` is a pure function of the description (what :mod:`hil.campaign_spec`
+:func:`run_one` is a pure function of the description (what :mod:`hil.campaign.spec`
 expands a spec into), so a row is the same on any worker; it never raises: a run that fails
 is a row with ``status = "failed"`` and the error in one line. :func:`scenario_doc` builds
 the run's complete scenario (a TOML-able doc), which ``--replay`` writes and simulates with
@@ -18,7 +18,7 @@ import numpy as np
 
 from agent.config import ControlParams, RobotParams
 from common.schema import from_table
-from hil.campaign_spec import families_module, run_key
+from hil.campaign.spec import families_module, run_key
 
 SWEPT_PREFIXES = ("family_", "world_", "control_")
 
