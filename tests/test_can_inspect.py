@@ -13,7 +13,7 @@ import can
 import pytest
 from helpers import free_port
 
-from hil.can_cli import armed_writer, replay
+from hil.cli.can import armed_writer, replay
 from hil.ground.can_inspect import BusStats
 from transport.busload import bus_load
 from transport.canbus import open_bus

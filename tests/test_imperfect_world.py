@@ -14,7 +14,7 @@ from firmware_sim.mocap_sim import MocapParams, Outage
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Kill, WorldParams
 from hil.cli import main
-from hil.exit_codes import EXIT_BAD_INPUT, EXIT_OK
+from hil.cli.exit_codes import EXIT_BAD_INPUT, EXIT_OK
 from hil.files.robot_profile import load_robot_profile
 from hil.files.scenario import ScenarioError, load_scenario, parse_scenario
 

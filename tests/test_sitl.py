@@ -201,7 +201,7 @@ def test_a_gap_in_the_truth_is_found_with_its_start():
 
 
 def test_the_worst_agent_and_the_stage_of_its_oldest_data():
-    from hil.sitl_cli import describe_stage, worst_age
+    from hil.cli.sitl import describe_stage, worst_age
     stats = {1: agent_stats(20.0, {"publish_to_router": 1.0, "router_to_agent": 3.0,
                                    "in_agent": 2.0}),
              2: agent_stats(90.0, {"publish_to_router": 2.0, "router_to_agent": 80.0,
@@ -224,7 +224,7 @@ def test_the_governors_share_and_least_speed_come_from_the_agents_counts():
     """A SITL run's governor figures are what the agents counted: the share of the periods in
     which the law ran, in all and per robot, and the least speed allowed (a killed agent
     wrote no statistics: it is not among them)."""
-    from hil.sitl_cli import governor_from_agents
+    from hil.cli.sitl import governor_from_agents
 
     def counted(steps, governed, least):
         return {"agent": {"law_steps": steps, "governed": governed,
@@ -238,8 +238,8 @@ def test_the_governors_share_and_least_speed_come_from_the_agents_counts():
 
 
 def test_missing_states_are_counted_per_robot():
+    from hil.cli.sitl import recording_check
     from hil.sitl.swarm import SitlRun
-    from hil.sitl_cli import recording_check
     run = SitlRun(agent_stats={1: agent_stats(1.0, None, 100), 2: agent_stats(1.0, None, 50)},
                   recorded={1: 100, 2: 47})
     assert recording_check(run) == {"states_published": 150, "states_recorded": 147,
@@ -411,7 +411,7 @@ def test_the_agents_share_processes_by_default_only_beyond_eight_robots_a_core()
 
 
 def test_old_data_with_many_processes_per_core_suggests_sharing_them():
-    from hil.sitl_cli import sharing_hint
+    from hil.cli.sitl import sharing_hint
     hint = sharing_hint(30, 2, 1)
     assert hint is not None and "--agents-per-process 8 runs them in 4" in hint
     assert sharing_hint(4, 2, 1) is None                # a process per robot keeps up

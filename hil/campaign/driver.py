@@ -36,7 +36,7 @@ from typing import Any, Callable, Iterator
 from rich.console import Console
 
 from hil.campaign.spec import CampaignSpec, Run, write_copy
-from hil.exit_codes import BadInput
+from hil.cli.exit_codes import BadInput
 from hil.sitl.host_cpu import machine_cores
 
 RUNS, TIMINGS, SESSIONS, PARQUET, LOCK = ("runs.jsonl", "timings.jsonl", "sessions.jsonl",
@@ -320,7 +320,7 @@ def _warn_other_code(folder: Path, code: str, reused: int, console: Console) -> 
 def _run(todo: list[Run], folder: Path, console: Console, workers: int | None,
          scheduler: str | None, in_flight: int | None, outcome: Outcome,
          done: dict[str, dict[str, Any]], name: str) -> None:
-    from hil.console import count_progress
+    from hil.cli.console import count_progress
     started = time.perf_counter()
     with dask_client(workers, scheduler) as client:
         if scheduler and not client.scheduler_info()["workers"]:

@@ -107,7 +107,7 @@ def _simulate(desc: Mapping[str, Any], key: str) -> dict[str, Any]:
                       options, world=sc.world, mocap=sc.mocap)
     metrics = result.metrics.summary(sc.name, options.duration)
     kill = (doc.get("world") or {}).get("kill") or [{}]
-    # as sim warns (hil.sim_cli.state_envelope: not on the ideal plant)
+    # as sim warns (hil.cli.sim.state_envelope: not on the ideal plant)
     held = sc.pace_held(sc.envelope()) if plant is PlantKind.WHEELS else None
     out: dict[str, Any] = {
         "kill_robot": kill[0].get("robot"), "kill_time": kill[0].get("at"),

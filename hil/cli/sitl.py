@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 
-from hil.cli_options import Subparsers, add_can_options, positive, priority
-from hil.console import summary_table
-from hil.exit_codes import EXIT_LOST, EXIT_NOT_RUN, EXIT_OK, EXIT_UNSAFE, BadInput
+from hil.cli.console import summary_table
+from hil.cli.exit_codes import EXIT_LOST, EXIT_NOT_RUN, EXIT_OK, EXIT_UNSAFE, BadInput
+from hil.cli.options import Subparsers, add_can_options, positive, priority
 from hil.sitl.host_cpu import rt_limit
 
 if TYPE_CHECKING:
@@ -95,11 +95,11 @@ def run(args: argparse.Namespace, console: Console) -> int:
     """Check the options, run the swarm, turn its recording into metrics and figures."""
     from agent.settings import near_radius_problem
     from common.schema import ConfigError, section_from_args
+    from hil.cli.sim import state_envelope
     from hil.files import run_folder
     from hil.files.figures import draw_figures
     from hil.files.robot_profile import SITL_DEFAULT, load_robot_profile
     from hil.files.scenario import load_scenario
-    from hil.sim_cli import state_envelope
     from hil.sitl.host_cpu import machine_cores
     from hil.sitl.launch import LaunchSettings
     from hil.sitl.report import analyse_recording

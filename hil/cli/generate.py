@@ -9,8 +9,8 @@ from typing import Any
 
 from rich.console import Console
 
-from hil.cli_options import Subparsers, positive
-from hil.exit_codes import EXIT_OK, BadInput
+from hil.cli.exit_codes import EXIT_OK, BadInput
+from hil.cli.options import Subparsers, positive
 
 
 def add_parser(sub: Subparsers) -> None:

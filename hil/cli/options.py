@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, TypeAlias
 
-from hil.exit_codes import BadInput
+from hil.cli.exit_codes import BadInput
 
 if TYPE_CHECKING:
     import zenoh

@@ -7,8 +7,8 @@ import threading
 
 from rich.console import Console
 
-from hil.cli_options import Subparsers, priority, zenoh_file
-from hil.exit_codes import EXIT_OK
+from hil.cli.exit_codes import EXIT_OK
+from hil.cli.options import Subparsers, priority, zenoh_file
 
 
 def add_parser(sub: Subparsers) -> None:

@@ -27,8 +27,8 @@ from rich.table import Table
 
 from agent.config import RobotParams
 from common.schema import add_argument_for
-from hil.cli_options import Subparsers, add_can_options, positive
-from hil.exit_codes import EXIT_BAD_INPUT, EXIT_OK, BadInput
+from hil.cli.exit_codes import EXIT_BAD_INPUT, EXIT_OK, BadInput
+from hil.cli.options import Subparsers, add_can_options, positive
 from hil.ground.can_inspect import BusStats
 from transport.canbus import open_bus
 from transport.odrive_frames import AxisState, Cmd, FrameError, decode, message_name

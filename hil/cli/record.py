@@ -8,8 +8,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from hil.cli_options import Subparsers, add_zenoh_client_options, swarm_name, zenoh_client
-from hil.exit_codes import EXIT_OK
+from hil.cli.exit_codes import EXIT_OK
+from hil.cli.options import Subparsers, add_zenoh_client_options, swarm_name, zenoh_client
 
 
 def add_parser(sub: Subparsers) -> None:

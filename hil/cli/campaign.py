@@ -8,8 +8,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from hil.cli_options import Subparsers
-from hil.exit_codes import EXIT_FAILED, EXIT_OK, BadInput
+from hil.cli.exit_codes import EXIT_FAILED, EXIT_OK, BadInput
+from hil.cli.options import Subparsers
 
 COMPARED = ("min_pair_distance", "min_obstacle_clearance", "converged", "convergence_time",
             "collisions")
@@ -89,10 +89,10 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
 def replay(args: argparse.Namespace, console: Console) -> int:
     """Write the run's scenario into the run folder and simulate it as ``sim`` does."""
-    from hil import sim_cli
     from hil.campaign import driver
     from hil.campaign.run import scenario_doc
     from hil.campaign.spec import load_spec
+    from hil.cli import sim
     from hil.files import toml_text
     if not args.out:
         raise BadInput("--out: required with --replay (the run folder to write)")
@@ -107,7 +107,7 @@ def replay(args: argparse.Namespace, console: Console) -> int:
     scenario = out / "scenario.toml"
     scenario.write_text(f"# run {run_.key} of campaign {spec.name!r} ({spec.source})\n"
                         + toml_text.dumps(scenario_doc(run_.description)))
-    code = sim_cli.run(argparse.Namespace(
+    code = sim.run(argparse.Namespace(
         scenario=str(scenario), out=str(out), duration=None, plant=None, robot=None,
         substeps=None, record_every=1), console)
     folder = Path(args.spec) if Path(args.spec).is_dir() else None

@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING
 from rich.console import Console
 
 from firmware_sim.plant import PlantKind
-from hil.cli_options import Subparsers
-from hil.console import LazyProgress, summary_table
-from hil.exit_codes import EXIT_OK, EXIT_UNSAFE, BadInput
+from hil.cli.console import LazyProgress, summary_table
+from hil.cli.exit_codes import EXIT_OK, EXIT_UNSAFE, BadInput
+from hil.cli.options import Subparsers
 
 if TYPE_CHECKING:
     from hil.files.scenario import Scenario

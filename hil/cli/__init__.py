@@ -1,8 +1,10 @@
 """The ``boundswarm`` command line: one module per subcommand, dispatched from here.
 
-Each ``hil/<name>_cli.py`` defines its subcommand's options (``add_parser``) and what it
-runs. Exit codes are in :mod:`hil.exit_codes`: 2 only for bad input (the message names the
-option, file or field), and a one-line message with exit 1 for any other error.
+Each ``hil/cli/<subcommand>.py`` defines its subcommand's options (``add_parser``) and what
+it runs; options that several share are in :mod:`hil.cli.options`, terminal output in
+:mod:`hil.cli.console`. Exit codes are in :mod:`hil.cli.exit_codes`: 2 only for bad input
+(the message names the option, file or field), and a one-line message with exit 1 for any
+other error. ``python -m hil.cli`` runs the command too (``hil/cli/__main__.py``).
 """
 from __future__ import annotations
 
@@ -14,25 +16,25 @@ import traceback
 
 from rich.console import Console
 
-from hil import (
-    agent_cli,
-    campaign_cli,
-    can_cli,
-    deploy_cli,
-    generate_cli,
-    mission_cli,
-    mocap_cli,
-    plant_cli,
-    record_cli,
-    report_cli,
-    router_cli,
-    sim_cli,
-    sitl_cli,
+from hil.cli import (
+    agent,
+    campaign,
+    can,
+    deploy,
+    generate,
+    mission,
+    mocap,
+    plant,
+    record,
+    report,
+    router,
+    sim,
+    sitl,
 )
-from hil.exit_codes import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, BadInput
+from hil.cli.exit_codes import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, BadInput
 
-SUBCOMMANDS = (sim_cli, sitl_cli, agent_cli, plant_cli, can_cli, deploy_cli, router_cli,
-               mission_cli, mocap_cli, record_cli, report_cli, generate_cli, campaign_cli)
+SUBCOMMANDS = (sim, sitl, agent, plant, can, deploy, router, mission, mocap, record, report,
+               generate, campaign)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -58,7 +60,7 @@ def stop_on_signals() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = plant_cli.as_subcommand(sys.argv[1:] if argv is None else argv)
+    argv = plant.as_subcommand(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
@@ -94,6 +96,3 @@ def bad_input() -> tuple[type[Exception], ...]:
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -7,9 +7,9 @@ from pathlib import Path
 
 from rich.console import Console
 
-from hil.cli_options import Subparsers
-from hil.console import summary_table
-from hil.exit_codes import EXIT_OK
+from hil.cli.console import summary_table
+from hil.cli.exit_codes import EXIT_OK
+from hil.cli.options import Subparsers
 
 
 def add_parser(sub: Subparsers) -> None:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from hil.cli_options import Subparsers
-from hil.exit_codes import EXIT_OK, BadInput
+from hil.cli.exit_codes import EXIT_OK, BadInput
+from hil.cli.options import Subparsers
 
 
 def add_parser(sub: Subparsers) -> None:

@@ -23,7 +23,8 @@ from rich.console import Console
 
 from agent.config import RobotParams
 from common.schema import add_argument_for
-from hil.cli_options import (
+from hil.cli.exit_codes import EXIT_OK, BadInput
+from hil.cli.options import (
     Subparsers,
     add_can_options,
     add_zenoh_client_options,
@@ -31,7 +32,6 @@ from hil.cli_options import (
     swarm_name,
     zenoh_client,
 )
-from hil.exit_codes import EXIT_OK, BadInput
 from transport.settings import CanSettings
 
 FLAG_FORMS = {"--drivers-only": "drivers", "--world-only": "world"}
