@@ -43,7 +43,7 @@ sim: $(STAMP)
 	$(BIN)/boundswarm sim scenarios/paper.toml --out runs/paper-sim
 
 test: $(STAMP) system-packages
-	-$(BIN)/python -m hil.uml ensure
+	-PYTHONPATH=tests $(BIN)/python -m tooling.uml ensure
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 	$(BIN)/python -m pytest

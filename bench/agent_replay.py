@@ -44,8 +44,8 @@ from agent.node import Agent  # noqa: E402
 from agent.settings import AgentSettings, SensingSettings  # noqa: E402
 from common.payloads import MissionMsg, ObstaclesMsg, Received, StateMsg  # noqa: E402
 from common.vocabulary import AgentMode, WheelFeedback  # noqa: E402
-from hil.robot_profile import load_robot_profile  # noqa: E402
-from hil.scenario import load_scenario  # noqa: E402
+from hil.files.robot_profile import load_robot_profile  # noqa: E402
+from hil.files.scenario import load_scenario  # noqa: E402
 
 DETECT_EVERY = 0.1     # s between obstacle detections (as the SITL's plant)
 

@@ -90,7 +90,7 @@ def main() -> None:
         ap.error(f"--data-age: from 0 up to the staleness limit, {staleness:g} s")
     robot = RobotParams()
     if args.robot:
-        from hil.robot_profile import load_robot_profile
+        from hil.files.robot_profile import load_robot_profile
         robot = load_robot_profile(args.robot)
     # the bench's agent ticks in place among neighbours that do not move: the deadlock
     # watch would warn every 10 s of simulated time, which says nothing here

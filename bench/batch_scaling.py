@@ -39,8 +39,8 @@ from firmware_sim import compiled, swarm_step
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles, WorldParams
-from hil.robot_profile import load_robot_profile
-from hil.scenario import load_scenario
+from hil.files.robot_profile import load_robot_profile
+from hil.files.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 

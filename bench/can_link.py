@@ -21,8 +21,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
 
-from hil import uml  # noqa: E402
+from tooling import uml  # noqa: E402
 
 
 def measure(interface: str, channel: str, port: int | None, seconds: float) -> dict:

@@ -28,7 +28,7 @@ from firmware_sim import compiled
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
-from hil.robot_profile import load_robot_profile
+from hil.files.robot_profile import load_robot_profile
 
 
 def record(robots: int, periods: int, robot_file: str, delay: float

@@ -21,7 +21,7 @@ from agent.config import ControlParams, RobotParams  # noqa: E402
 from agent.discs import neighbour_radii  # noqa: E402
 from agent.params import LawParams, NeighbourModel  # noqa: E402
 from agent.trail import SPLITS, straight  # noqa: E402
-from hil.robot_profile import load_robot_profile  # noqa: E402
+from hil.files.robot_profile import load_robot_profile  # noqa: E402
 
 NEIGHBOURS, ROUNDS, REPEATS = 20, 200, 7
 AGES = (0.0, 0.05, 0.2, 0.5)     # s

@@ -12,7 +12,7 @@ from agent.params import NeighbourModel
 
 # When a wall-clock swarm run had the machine it needed, so that its liveness (it converges,
 # no failsafe or watchdog trip) says something about the swarm: the share of the CPU a VM's
-# host stole during the mission (hil.host_cpu), and the share of the mission's periods the
+# host stole during the mission (hil.sitl.host_cpu), and the share of the mission's periods the
 # worst agent missed. A swarm of 9 agents with their drivers, world and router needs about
 # 1.6 of this machine's 2 cores; at the 27-63 % steal seen here on 2026-12-03 every agent
 # starves, and runs in which every robot's drivers tripped their watchdog at once missed

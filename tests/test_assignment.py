@@ -1,10 +1,10 @@
-"""The assignment of robots to a formation's places as a set (hil/assignment.py)."""
+"""The assignment of robots to a formation's places as a set (hil/files/assignment.py)."""
 import itertools
 
 import numpy as np
 import pytest
 
-from hil.assignment import shortest_assignment
+from hil.files.assignment import shortest_assignment
 
 
 def total(starts, slots, perm):

@@ -11,7 +11,7 @@ from agent.formation import Formation, FormationKind, formation_offsets
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Obstacles
-from hil.scenario import load_scenario
+from hil.files.scenario import load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 

@@ -38,7 +38,7 @@ micro = ["head_on_swap"]
 @pytest.fixture(scope="module")
 def families():
     """The environment of the processes a test starts (Dask workers): this checkout first
-    on PYTHONPATH, so that they run this code (hil.families among it)."""
+    on PYTHONPATH, so that they run this code (hil.campaign.families among it)."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
     saved = os.environ.get("PYTHONPATH")
@@ -111,7 +111,7 @@ hysteresis = [0.0, 0.5]
 
 
 def test_robot_profiles_given_on_the_command_line_replace_the_specs(tmp_path, families):
-    from hil.campaign_spec import load_spec
+    from hil.campaign.spec import load_spec
     root = Path(__file__).resolve().parent.parent
     spec = load_spec(write_spec(tmp_path, CROSSED),
                      profiles=[str(root / "robots" / "heavy.toml")])
@@ -120,7 +120,7 @@ def test_robot_profiles_given_on_the_command_line_replace_the_specs(tmp_path, fa
 
 
 def test_a_spec_crosses_its_values_into_runs_with_stable_keys(tmp_path, families):
-    from hil.campaign_spec import load_spec, run_key
+    from hil.campaign.spec import load_spec, run_key
     spec = load_spec(write_spec(tmp_path, CROSSED))
     # (2 kinds x 2 sizes + 2 micro cases) x 3 seeds x 2 profiles x 2 delays x 2 hysteresis
     assert len(spec.runs) == 6 * 3 * 2 * 2 * 2 == 144
@@ -144,8 +144,8 @@ def test_a_spec_crosses_its_values_into_runs_with_stable_keys(tmp_path, families
 
 
 def test_world_seed_and_kill_depend_on_the_seed_and_family_only(tmp_path, families):
-    from hil.campaign_run import scenario_doc
-    from hil.campaign_spec import load_spec
+    from hil.campaign.run import scenario_doc
+    from hil.campaign.spec import load_spec
     spec = load_spec(write_spec(tmp_path, CROSSED))
     by_case: dict[str, set] = {}
     for r in spec.runs:
@@ -169,9 +169,9 @@ def test_world_seed_and_kill_depend_on_the_seed_and_family_only(tmp_path, famili
 
 
 def test_both_assignments_of_a_scene_meet_the_same_world(tmp_path, families):
-    from hil.campaign_run import scenario_doc
-    from hil.campaign_spec import load_spec
-    from hil.scenario import parse_scenario
+    from hil.campaign.run import scenario_doc
+    from hil.campaign.spec import load_spec
+    from hil.files.scenario import parse_scenario
     spec = load_spec(write_spec(tmp_path, """
 name = "assign"
 seeds = 4
@@ -202,8 +202,8 @@ kill_at = [2.0, 4.0]
 def test_mocap_goes_to_the_runs_whose_odometry_is_wrong(tmp_path, families):
     """A spec's [mocap] is the pose source of the runs with wheel slip (their scenario
     gets it); the other runs keep their description, hence their keys and cached rows."""
-    from hil.campaign_run import scenario_doc
-    from hil.campaign_spec import load_spec
+    from hil.campaign.run import scenario_doc
+    from hil.campaign.spec import load_spec
     text = CROSSED.replace("loss_burst = 2", "loss_burst = 2\nwheel_slip = [0.0, 0.05]")
     plain = load_spec(write_spec(tmp_path / "a", text))
     spec = load_spec(write_spec(tmp_path / "b", text + "[mocap]\nrate = 50.0\n"))
@@ -238,8 +238,8 @@ def test_mocap_goes_to_the_runs_whose_odometry_is_wrong(tmp_path, families):
 ])
 def test_a_wrong_field_is_refused_naming_the_file_and_the_field(tmp_path, families, change,
                                                                 field):
-    from hil.campaign_spec import load_spec
-    from hil.scenario import ScenarioError
+    from hil.campaign.spec import load_spec
+    from hil.files.scenario import ScenarioError
     old, new = change
     assert old in CROSSED
     path = write_spec(tmp_path, CROSSED.replace(old, new))
@@ -258,8 +258,8 @@ def test_a_bad_spec_exits_2_and_names_the_field(tmp_path, families, capsys):
 
 # --- rows and tables ------------------------------------------------------------------------
 def test_a_run_that_raises_is_a_failed_row(monkeypatch):
-    from hil import families
-    from hil.campaign_run import run_one
+    from hil.campaign import families
+    from hil.campaign.run import run_one
     desc = {"family": {"kind": "line", "robots": 5}, "seed": 0, "duration": 5.0,
             "profile": "none", "robot": None, "control": {}}
 
@@ -278,8 +278,8 @@ def test_a_row_says_whether_the_governor_lets_robots_keep_the_formation_s_pace(
     move at up to 3.6 m/s, which with 0.5 s old data needs 5.2 m behind each robot
     (docs/controller.md A10): the row's pace_held is false, as sim warns; without delay,
     true."""
-    from hil.campaign_run import run_one
-    from hil.campaign_spec import load_spec
+    from hil.campaign.run import run_one
+    from hil.campaign.spec import load_spec
     spec = load_spec(ROOT / "campaigns" / "realistic-sparse.toml")
     desc = next(dict(r.description) for r in spec.runs
                 if r.description["family"]["kind"] == "rotating_circle"
@@ -294,7 +294,7 @@ def test_a_row_says_whether_the_governor_lets_robots_keep_the_formation_s_pace(
 def test_the_report_counts_the_runs_whose_formation_cannot_be_held_apart(tmp_path):
     """With any run whose formation the governor cannot hold at its pace, the report
     tallies pace_held yes and no; without one, it has no such section."""
-    from hil.campaign_report import write_report
+    from hil.campaign.report import write_report
 
     def row(key, held, converged):
         return {"key": key, "status": "ok", "profile": "sporty", "safe": True,
@@ -315,7 +315,7 @@ def test_warming_up_leaves_out_a_worker_lost_meanwhile():
     under another, at low priority, aborted there with CommClosedError)."""
     from distributed.comm.core import CommClosedError
 
-    from hil.campaign import _warm_up
+    from hil.campaign.driver import _warm_up
 
     class Client:
         def run(self, function, on_error="raise"):
@@ -326,7 +326,7 @@ def test_warming_up_leaves_out_a_worker_lost_meanwhile():
 
 
 def test_rows_become_typed_arrow_columns():
-    from hil.campaign import arrow_table
+    from hil.campaign.driver import arrow_table
     rows = [{"key": "a", "n": 1, "x": 1, "ok": True, "pairs": [[1, 2]], "t": None},
             {"key": "b", "n": 2, "x": 2.5, "ok": None, "pairs": [], "t": None, "new": "s"}]
     table = arrow_table(rows)
@@ -338,7 +338,7 @@ def test_rows_become_typed_arrow_columns():
 
 
 def test_wilson_interval():
-    from hil.campaign_report import wilson
+    from hil.campaign.report import wilson
     lo, hi = wilson(0, 10)
     assert lo == 0.0 and hi == pytest.approx(0.2775, abs=1e-4)
     lo, hi = wilson(5, 10)
@@ -423,8 +423,8 @@ def test_an_unreachable_scheduler_exits_1_and_a_malformed_one_2(tmp_path, famili
                                                                 monkeypatch):
     from helpers import free_port
 
-    from hil import campaign
-    monkeypatch.setattr(campaign, "CONNECT_TIMEOUT", 1.0)
+    from hil.campaign import driver
+    monkeypatch.setattr(driver, "CONNECT_TIMEOUT", 1.0)
     spec = write_spec(tmp_path, TINY)
     address = f"tcp://127.0.0.1:{free_port()}"
     assert main(["campaign", str(spec), "--out", str(tmp_path / "o"),
@@ -544,7 +544,7 @@ def test_smoke_report_has_groups_and_intervals_and_its_replay_writes_a_run_folde
                          ids=lambda p: p.stem)
 def test_every_shipped_campaign_expands(spec_file, families):
     """Each campaign in campaigns/ loads, its profiles and families included."""
-    from hil.campaign_spec import load_spec
+    from hil.campaign.spec import load_spec
     spec = load_spec(spec_file)
     assert spec.runs and len({r.key for r in spec.runs}) == len(spec.runs)
 
@@ -552,7 +552,7 @@ def test_every_shipped_campaign_expands(spec_file, families):
 def test_the_sparse_campaign_is_the_realistic_campaign_s_sparse_runs(families):
     """campaigns/realistic-sparse.toml runs issue 16's measure alone: the very runs (keys,
     so scenes and worlds) of the full campaign's sparse fields, and no others."""
-    from hil.campaign_spec import load_spec
+    from hil.campaign.spec import load_spec
     full = load_spec(ROOT / "campaigns" / "realistic.toml")
     sparse = {r.key for r in full.runs
               if r.description.get("family", {}).get("field") == "sparse"}
@@ -561,7 +561,7 @@ def test_the_sparse_campaign_is_the_realistic_campaign_s_sparse_runs(families):
 
 
 def test_the_speed_up_campaign_sets_speed_up_on_one_of_each_pair(families):
-    from hil.campaign_spec import load_spec
+    from hil.campaign.spec import load_spec
     spec = load_spec(ROOT / "campaigns" / "speed-up.toml")
     speed_up = {r.description["profile"]: r.description["robot"].get("speed_up", 0.0)
                 for r in spec.runs}
@@ -569,7 +569,7 @@ def test_the_speed_up_campaign_sets_speed_up_on_one_of_each_pair(families):
 
 
 def test_the_realistic_campaign_has_over_a_thousand_runs(families):
-    from hil.campaign_spec import load_spec
+    from hil.campaign.spec import load_spec
     spec = load_spec(REALISTIC)
     assert len(spec.runs) >= 1000
     profiles = {r.description["profile"] for r in spec.runs}
@@ -583,7 +583,7 @@ def test_a_local_cluster_has_a_worker_per_core_this_process_may_run_on(monkeypat
     taskset's share), not one per CPU of the machine, which would oversubscribe it."""
     import distributed
 
-    from hil import campaign
+    from hil.campaign import driver
     made: dict = {}
 
     class Cluster:
@@ -604,6 +604,6 @@ def test_a_local_cluster_has_a_worker_per_core_this_process_may_run_on(monkeypat
     monkeypatch.setattr(distributed, "Client", Client)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3})
     assert os.cpu_count() != 1          # else this test could not tell the two apart
-    with campaign.dask_client(None, None):
+    with driver.dask_client(None, None):
         pass
     assert made["n_workers"] == 1 and made["closed"]

@@ -280,7 +280,7 @@ def test_watchdog_enable_flag_and_timeout():
 
 
 def test_the_robot_profile_sets_the_watchdog_for_drivers_and_law(tmp_path):
-    from hil.robot_profile import load_robot_profile
+    from hil.files.robot_profile import load_robot_profile
     path = tmp_path / "bot.toml"
     path.write_text("[robot]\nwatchdog_timeout = 0.25\n")
     robot = load_robot_profile(path)

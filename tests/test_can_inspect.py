@@ -13,8 +13,8 @@ import can
 import pytest
 from helpers import free_port
 
-from hil.can_cli import armed_writer, replay
-from hil.can_inspect import BusStats
+from hil.cli.can import armed_writer, replay
+from hil.ground.can_inspect import BusStats
 from transport.busload import bus_load
 from transport.canbus import open_bus
 from transport.odrive_frames import Cmd, encode

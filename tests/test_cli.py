@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from hil.cli import main
-from hil.figures import FIGURE_FILES
-from hil.plant_cli import as_subcommand
-from hil.run_folder import read_run
+from hil.cli.plant import as_subcommand
+from hil.files.figures import FIGURE_FILES
+from hil.files.run_folder import read_run
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"

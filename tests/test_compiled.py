@@ -13,7 +13,7 @@ from firmware_sim import compiled
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Kill, Obstacles, WorldParams
-from hil.scenario import load_scenario
+from hil.files.scenario import load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 

@@ -71,7 +71,7 @@ def test_the_envelope_says_how_far_apart_robots_at_the_pace_must_be_to_pass_betw
     two such robots only more than two discs apart. With 0.5 s old data, places 5 m apart
     let a cart through, and the fast profile, whose law speeds it and its turn up slower
     than its wheels can (docs/controller.md A17; without that, 6.5 m)."""
-    from hil.robot_profile import load_robot_profile
+    from hil.files.robot_profile import load_robot_profile
     robot = load_robot_profile(Path(__file__).resolve().parent.parent / "robots"
                                / f"{profile}.toml")
     p = ControlParams()
@@ -140,7 +140,7 @@ def test_the_envelope_says_how_close_behind_another_a_robot_keeps_the_pace(room,
     from firmware_sim.batch import SimOptions, simulate
     from firmware_sim.plant import PlantKind
     from firmware_sim.world import Obstacles, WorldParams
-    from hil.robot_profile import load_robot_profile
+    from hil.files.robot_profile import load_robot_profile
     robot = load_robot_profile(Path(__file__).resolve().parent.parent / "robots"
                                / "sporty.toml")
     p, pace, delay = ControlParams(), 3.5, 0.5

@@ -2,7 +2,7 @@ import io
 
 from rich.console import Console
 
-from hil.console import LazyProgress, summary_table
+from hil.cli.console import LazyProgress, summary_table
 
 
 class FakeClock:

@@ -14,7 +14,7 @@ import zenoh
 from cryptography import x509
 from helpers import free_port
 
-from hil.deploy import DeployError, deploy, load_manifest
+from hil.ground.deploy import DeployError, deploy, load_manifest
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV_BIN = Path(sys.executable).parent
@@ -331,7 +331,7 @@ def test_a_replayed_state_payload_is_dropped_by_the_neighbours(bundles, router):
 def test_the_example_manifest_deploys_with_its_motion_capture_bridge(tmp_path):
     from agent.pose import PoseSettings
     from agent.settings import load_settings
-    from hil.mocap import load_mocap_settings
+    from hil.ground.mocap import load_mocap_settings
     made = deploy(load_manifest(ROOT / "examples" / "swarm.toml"), tmp_path,
                   wheel=ROOT / "README.md")
     assert set(made) == {"ground"} | {f"robot-{i}" for i in range(1, 10)}

@@ -1,4 +1,4 @@
-"""Seeded scenario families and micro cases (hil/families.py): valid scenario documents,
+"""Seeded scenario families and micro cases (hil/campaign/families.py): valid scenario documents,
 deterministic, holding the geometry they promise; and ``boundswarm generate``."""
 import itertools
 import math
@@ -11,8 +11,7 @@ import pytest
 from agent.config import ControlParams
 from agent.formation import FormationKind, formation_offsets
 from firmware_sim.batch import SimOptions, simulate
-from hil.cli import main
-from hil.families import (
+from hil.campaign.families import (
     CHAIN_GAPS,
     FIELDS,
     KINDS,
@@ -26,10 +25,11 @@ from hil.families import (
     micro_doc,
     micro_scene,
 )
-from hil.robot_profile import load_robot_profile
-from hil.scenario import ScenarioError, load_scenario, parse_scenario
-from hil.scene import rot, wrap
-from hil.toml_text import dumps
+from hil.campaign.scene import rot, wrap
+from hil.cli import main
+from hil.files.robot_profile import load_robot_profile
+from hil.files.scenario import ScenarioError, load_scenario, parse_scenario
+from hil.files.toml_text import dumps
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -26,8 +26,8 @@ from agent.kinematics import wrap_angle
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import WorldParams
-from hil.robot_profile import load_robot_profile
-from hil.scenario import load_scenario
+from hil.files.robot_profile import load_robot_profile
+from hil.files.scenario import load_scenario
 
 
 def test_braking_speed_uses_exactly_the_free_distance():

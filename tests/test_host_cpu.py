@@ -1,7 +1,7 @@
 """The host's stolen CPU share, from /proc/stat readings."""
 from pathlib import Path
 
-from hil.host_cpu import CpuTimes, busy_share, cpu_times, rt_limit, steal_share
+from hil.sitl.host_cpu import CpuTimes, busy_share, cpu_times, rt_limit, steal_share
 
 LINE = "cpu  {user} 0 {system} {idle} 0 0 0 {steal} 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\nintr 1\n"
 
@@ -60,10 +60,10 @@ def test_the_kernel_cap_on_real_time_processes(tmp_path):
 
 
 def test_a_saturated_machine_is_named_in_the_missed_periods_warning(monkeypatch):
-    from hil import sitl_cli
-    assert sitl_cli.saturation(None) == "" and sitl_cli.saturation(0.5) == ""
-    monkeypatch.setattr(sitl_cli, "rt_limit", lambda: 0.95)
-    clause = sitl_cli.saturation(0.97)
+    from hil.cli import sitl
+    assert sitl.saturation(None) == "" and sitl.saturation(0.5) == ""
+    monkeypatch.setattr(sitl, "rt_limit", lambda: 0.95)
+    clause = sitl.saturation(0.97)
     assert "97% busy" in clause and "95% of each second" in clause
-    monkeypatch.setattr(sitl_cli, "rt_limit", lambda: None)
-    assert sitl_cli.saturation(0.97) == " (its CPUs were 97% busy in the mission)"
+    monkeypatch.setattr(sitl, "rt_limit", lambda: None)
+    assert sitl.saturation(0.97) == " (its CPUs were 97% busy in the mission)"

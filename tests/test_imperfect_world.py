@@ -15,9 +15,9 @@ from firmware_sim.mocap_sim import MocapParams, Outage
 from firmware_sim.plant import PlantKind
 from firmware_sim.world import Kill, WorldParams
 from hil.cli import main
-from hil.exit_codes import EXIT_BAD_INPUT, EXIT_OK
-from hil.robot_profile import load_robot_profile
-from hil.scenario import ScenarioError, load_scenario, parse_scenario
+from hil.cli.exit_codes import EXIT_BAD_INPUT, EXIT_OK
+from hil.files.robot_profile import load_robot_profile
+from hil.files.scenario import ScenarioError, load_scenario, parse_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = load_scenario(ROOT / "scenarios" / "paper.toml")
@@ -110,8 +110,8 @@ def test_fix_noise_does_not_become_a_heading_rate():
     correction must not enter the error's finite difference (agent.law.moved_estimate).
     It would make a heading rate of tenths of a rad/s, and the governor, braking for the
     turn, would hold the carts behind their slots for the whole run."""
-    from hil.families import family_doc
-    from hil.scenario import parse_scenario
+    from hil.campaign.families import family_doc
+    from hil.files.scenario import parse_scenario
     doc = family_doc({"kind": "line", "robots": 8, "field": "sparse"}, 0, duration=120.0,
                      top_speed=CART.v_wheel_max)
     sc = parse_scenario(doc, "line")

@@ -305,7 +305,7 @@ def test_track_does_not_sidestep_a_neighbour_beyond_the_reference():
 
 def _cart():
     """The 0.8 m hoverboard cart of robots/cart.toml (3 m/s, 2 m/s^2)."""
-    from hil.robot_profile import load_robot_profile
+    from hil.files.robot_profile import load_robot_profile
     return load_robot_profile(str(Path(__file__).resolve().parent.parent / "robots"
                                   / "cart.toml"))
 

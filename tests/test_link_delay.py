@@ -1,4 +1,4 @@
-"""The delaying TCP relay (hil.link_delay), on loopback only: an echo server upstream."""
+"""The delaying TCP relay (tooling.link_delay), on loopback only: an echo server upstream."""
 import hashlib
 import os
 import random
@@ -12,10 +12,9 @@ import time
 from pathlib import Path
 
 import pytest
+from tooling.link_delay import DelayRelay, main
 
-from hil.link_delay import DelayRelay, main
-
-ROOT = Path(__file__).resolve().parent.parent
+TESTS = Path(__file__).resolve().parent     # where python -m tooling.link_delay runs
 
 
 class EchoServer:
@@ -225,13 +224,13 @@ def test_bad_arguments_say_what_is_wrong(capsys, echo):
 
 
 def test_command_line_with_control_file(echo, tmp_path):
-    """python -m hil.link_delay: the printed address, the delay changed through the control
+    """python -m tooling.link_delay: the printed address, the delay changed through the control
     file, a clean exit on SIGINT."""
     control = tmp_path / "delay_ms"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "hil.link_delay", "--listen", "127.0.0.1:0", "--upstream",
+        [sys.executable, "-m", "tooling.link_delay", "--listen", "127.0.0.1:0", "--upstream",
          f"{echo.address[0]}:{echo.address[1]}", "--delay-ms", "0", "--control", str(control)],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        cwd=TESTS, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None and proc.stderr is not None
         line = proc.stdout.readline()

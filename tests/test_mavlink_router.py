@@ -6,7 +6,7 @@ import socket
 import pytest
 from pymavlink.dialects.v20 import common as mav2
 
-from hil.mavlink_router import MavlinkRouter
+from hil.sitl.mavlink_router import MavlinkRouter
 
 WAIT = 5.0               # s, generous on a shared machine (the router forwards every 10 ms)
 

@@ -37,7 +37,7 @@ from helpers import alive, free_port  # noqa: E402
 from agent.config import CONTROL_PARAMS as PARAMS  # noqa: E402
 from common.payloads import PayloadError, StateMsg, TruthMsg  # noqa: E402
 from common.vocabulary import StateFlags  # noqa: E402
-from hil.processes import wait_until  # noqa: E402
+from hil.sitl.processes import wait_until  # noqa: E402
 from transport.zenoh_link import Keys, open_session, session_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -9,7 +9,7 @@ from helpers import free_port
 from common.payloads import MissionMsg, StateMsg
 from common.vocabulary import StateFlags
 from hil.cli import main
-from hil.exit_codes import EXIT_OK
+from hil.cli.exit_codes import EXIT_OK
 from transport.zenoh_link import Keys, open_session, session_config
 
 SCENARIO = """

@@ -17,7 +17,7 @@ from helpers import free_port
 
 from common.payloads import FixMsg
 from common.schema import ConfigError
-from hil.mocap import Bridge, load_mocap_settings, yaw
+from hil.ground.mocap import Bridge, load_mocap_settings, yaw
 from transport.zenoh_link import Keys, open_session, session_config
 
 ROOT = Path(__file__).resolve().parent.parent

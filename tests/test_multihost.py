@@ -11,7 +11,7 @@ robot's namespace (interface-local group, hop limit 0).
 Link faults on one robot's agent (its drivers keep a sound link: they stand for its wheels):
 loss with nftables at the ground station's input on a second router port (``LOSSY_PORT``)
 that the agent's zenoh.json5 is pointed at; delay (this kernel has no netem) with a
-delaying TCP relay (hil.link_delay) in the ground namespace on ``10.77.0.1:7448`` in front of
+delaying TCP relay (tooling.link_delay) in the ground namespace on ``10.77.0.1:7448`` in front of
 the router, which that robot's zenoh.json5 is pointed at (the router certificate names
 10.77.0.1, so TLS still validates on the other ports).
 """
@@ -30,11 +30,11 @@ from pathlib import Path
 import pytest
 from helpers import judge_liveness
 
-from hil.deploy import REALTIME_PRIORITY, deploy, load_manifest
-from hil.host_cpu import cpu_times, steal_share
-from hil.recorder import read_messages
-from hil.scenario import load_scenario
-from hil.sitl_report import analyse_recording, missed_in
+from hil.files.scenario import load_scenario
+from hil.ground.deploy import REALTIME_PRIORITY, deploy, load_manifest
+from hil.ground.recorder import read_messages
+from hil.sitl.host_cpu import cpu_times, steal_share
+from hil.sitl.report import analyse_recording, missed_in
 
 ROOT = Path(__file__).resolve().parent.parent
 BIN = str(Path(sys.executable).parent / "boundswarm")
@@ -295,9 +295,9 @@ def run_swarm(tmp_path: Path, scenario: Path = SCENARIO, duration: float = 14.0,
         relay = None
         if isinstance(fault, Delay):
             relay = hosts.start(hosts.ground, "relay",
-                                ["-m", "hil.link_delay", "--listen", f"10.77.0.1:{RELAY_PORT}",
+                                ["-m", "tooling.link_delay", "--listen", f"10.77.0.1:{RELAY_PORT}",
                                  "--upstream", "10.77.0.1:7447", "--delay-ms", "0",
-                                 "--control", str(control), "-v"], ROOT, logs,
+                                 "--control", str(control), "-v"], ROOT / "tests", logs,
                                 program=(sys.executable,))
             assert _wait_for(logs / "relay.log", "relaying", 30), (logs / "relay.log").read_text()
         hosts.start(hosts.ground, "world", ["plant", "world", "--scenario",

@@ -324,7 +324,7 @@ def test_remote_robot_rolls_through_every_report_late_or_not():
 def test_truth_between_late_reports_is_interpolated():
     """The SITL report's truth at a control period lies between the samples stamped before
     and after it (a late report must not show a robot behind where it was)."""
-    from hil.sitl_report import _pose_at
+    from hil.sitl.report import _pose_at
 
     times = np.array([0.0, 0.2])
     values = np.array([[0.0, 0.0, 0.0, 2.0, 0.0], [0.4, 0.1, 0.5, 2.0, 0.0]])

@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from hil.processes import Child, Children
+from hil.sitl.processes import Child, Children
 
 STUBBORN = ("import signal, sys, time; signal.signal(signal.SIGINT, signal.SIG_IGN); "
             "print('ready', flush=True); time.sleep(60)")

@@ -12,8 +12,8 @@ from mcap.reader import make_reader
 
 from common.payloads import MissionMsg, ObstaclesMsg, PayloadError, StateMsg, TruthMsg, WheelsMsg
 from common.vocabulary import StateFlags
-from hil.processes import wait_until
-from hil.recorder import ENCODERS, Recorder, read_messages
+from hil.ground.recorder import ENCODERS, Recorder, read_messages
+from hil.sitl.processes import wait_until
 from transport.zenoh_link import Keys, open_session, session_config
 
 

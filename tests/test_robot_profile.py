@@ -8,7 +8,7 @@ import pytest
 from agent.config import RobotParams
 from common.schema import ConfigError
 from hil.cli import main
-from hil.robot_profile import load_robot_profile
+from hil.files.robot_profile import load_robot_profile
 
 ROOT = Path(__file__).resolve().parent.parent
 ROBOTS = ROOT / "robots"

@@ -3,7 +3,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.scenario import ScenarioError, load_scenario
+from hil.files.scenario import ScenarioError, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 PAPER_POSES = Path(__file__).resolve().parent / "data" / "paper-initial-poses.csv"   # the paper's

@@ -20,10 +20,10 @@ from helpers import alive, free_port, judge_liveness
 from common.payloads import MissionMsg
 from firmware_sim.batch import SimOptions, simulate
 from firmware_sim.plant import PlantKind
-from hil.recorder import read_messages
-from hil.robot_profile import load_robot_profile
-from hil.run_folder import read_run
-from hil.scenario import load_scenario
+from hil.files.robot_profile import load_robot_profile
+from hil.files.run_folder import read_run
+from hil.files.scenario import load_scenario
+from hil.ground.recorder import read_messages
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"
@@ -172,7 +172,7 @@ def test_sitl_agents_exchange_places_over_their_state_messages(launch, tmp_path)
 
 
 def test_mission_misses_are_the_overruns_between_epoch_and_end():
-    from hil.sitl_report import missed_in
+    from hil.sitl.report import missed_in
     loop = {"overruns": 6, "overrun_events": [[99.5, 1], [100.0, 2], [107.2, 1], [110.1, 2]]}
     assert missed_in(loop, 100.0, 110.0) == 3          # start-up and shut-down left out
     assert missed_in({"overrun_events": []}, 100.0, 110.0) == 0
@@ -189,7 +189,7 @@ def agent_stats(p99: float, tails: dict | None, published: int = 100) -> dict:
 
 
 def test_a_gap_in_the_truth_is_found_with_its_start():
-    from hil.sitl_report import truth_gap
+    from hil.sitl.report import truth_gap
     samples = np.concatenate([np.arange(0.0, 11.2, 0.01), np.arange(19.5, 20.0, 0.01)])
     gap = truth_gap(samples, 20.0)
     assert gap["seconds"] == pytest.approx(19.5 - samples[1119]) and gap["at"] == samples[1119]
@@ -201,7 +201,7 @@ def test_a_gap_in_the_truth_is_found_with_its_start():
 
 
 def test_the_worst_agent_and_the_stage_of_its_oldest_data():
-    from hil.sitl_cli import describe_stage, worst_age
+    from hil.cli.sitl import describe_stage, worst_age
     stats = {1: agent_stats(20.0, {"publish_to_router": 1.0, "router_to_agent": 3.0,
                                    "in_agent": 2.0}),
              2: agent_stats(90.0, {"publish_to_router": 2.0, "router_to_agent": 80.0,
@@ -224,7 +224,7 @@ def test_the_governors_share_and_least_speed_come_from_the_agents_counts():
     """A SITL run's governor figures are what the agents counted: the share of the periods in
     which the law ran, in all and per robot, and the least speed allowed (a killed agent
     wrote no statistics: it is not among them)."""
-    from hil.sitl_cli import governor_from_agents
+    from hil.cli.sitl import governor_from_agents
 
     def counted(steps, governed, least):
         return {"agent": {"law_steps": steps, "governed": governed,
@@ -238,8 +238,8 @@ def test_the_governors_share_and_least_speed_come_from_the_agents_counts():
 
 
 def test_missing_states_are_counted_per_robot():
-    from hil.sitl import SitlRun
-    from hil.sitl_cli import recording_check
+    from hil.cli.sitl import recording_check
+    from hil.sitl.swarm import SitlRun
     run = SitlRun(agent_stats={1: agent_stats(1.0, None, 100), 2: agent_stats(1.0, None, 50)},
                   recorded={1: 100, 2: 47})
     assert recording_check(run) == {"states_published": 150, "states_recorded": 147,
@@ -350,7 +350,7 @@ def test_configs_that_cannot_share_a_process_are_refused_naming_why(tmp_path):
     """Two agent configs in one process need the same loop and session: a different tick
     phase is named; so is a --stats count that does not match the --config count."""
     from common.schema import to_toml
-    from hil.sitl import SitlOptions, agent_settings
+    from hil.sitl.swarm import SitlOptions, agent_settings
     sc = load_scenario(SCENARIOS / "sitl_small.toml")
     paths = []
     for index in (0, 1):
@@ -382,7 +382,7 @@ def test_configs_that_cannot_share_a_process_are_refused_naming_why(tmp_path):
 
 def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
     from agent.settings import AgentSettings
-    from hil.sitl import agent_hosts
+    from hil.sitl.swarm import agent_hosts
     settings = [AgentSettings(robot_id=i, swarm="t", initial_pose=(0.0, 0.0, 0.0),
                               tick_phase=(i % 2) * 0.01) for i in range(1, 10)]
     hosts = agent_hosts(settings, 3, killed={4})
@@ -395,7 +395,7 @@ def test_agents_are_grouped_by_phase_and_a_robot_the_world_kills_runs_alone():
 def test_the_agents_share_processes_by_default_only_beyond_eight_robots_a_core():
     """(tick groups, agents per process): shared processes tick in four groups, about two
     processes per core, each group's robots split evenly."""
-    from hil.sitl_launch import LaunchSettings, agent_layout
+    from hil.sitl.launch import LaunchSettings, agent_layout
     auto = LaunchSettings()
     assert agent_layout(16, 2, auto) == (1, 1)          # a process per robot, one phase
     assert agent_layout(17, 2, auto) == (4, 5)          # four groups, 4 processes
@@ -411,7 +411,7 @@ def test_the_agents_share_processes_by_default_only_beyond_eight_robots_a_core()
 
 
 def test_old_data_with_many_processes_per_core_suggests_sharing_them():
-    from hil.sitl_cli import sharing_hint
+    from hil.cli.sitl import sharing_hint
     hint = sharing_hint(30, 2, 1)
     assert hint is not None and "--agents-per-process 8 runs them in 4" in hint
     assert sharing_hint(4, 2, 1) is None                # a process per robot keeps up

@@ -15,7 +15,7 @@ from helpers import alive
 
 from common.payloads import FixMsg
 from firmware_sim.mocap_sim import MocapParams, Outage, SimulatedMocap
-from hil.scenario import ScenarioError, load_scenario
+from hil.files.scenario import ScenarioError, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -123,7 +123,7 @@ def test_the_mocap_table_is_checked_naming_file_and_field(tmp_path):
 
 
 def test_the_launcher_gives_the_agents_a_pose_table_only_with_mocap(tmp_path):
-    from hil.sitl import SitlOptions, agent_settings
+    from hil.sitl.swarm import SitlOptions, agent_settings
     _, sc = _scenario(tmp_path)
     s = agent_settings(sc, 1, "tiny", "tcp/127.0.0.1:7447", SitlOptions(), 14550)
     assert s.pose is not None and s.pose.fix_timeout == 0.5

@@ -405,14 +405,14 @@ at = {at}
 
 
 def _scenario(tmp_path, duration=8.0, world=WORLD, at=2.0):
-    from hil.scenario import load_scenario
+    from hil.files.scenario import load_scenario
     path = tmp_path / "tiny.toml"
     path.write_text(SCENARIO.format(duration=duration, world=world.format(at=at)))
     return path, load_scenario(path)
 
 
 def test_the_launcher_writes_the_impairment_only_for_an_impaired_link(tmp_path):
-    from hil.sitl import SitlOptions, agent_settings
+    from hil.sitl.swarm import SitlOptions, agent_settings
     _, sc = _scenario(tmp_path)
     s = agent_settings(sc, 1, "tiny", "tcp/127.0.0.1:7447", SitlOptions(), 14550)
     assert s.impairment == ImpairmentSettings(seed=3, link_delay=0.04, link_jitter=0.01,
@@ -451,21 +451,21 @@ def _recording(sc, epoch=1000.0, T=0.02, death=2.0, onto_the_dead=None):
 
 
 def test_a_killed_robot_counts_for_safety_but_not_for_convergence(tmp_path, monkeypatch):
-    from hil import sitl_report
+    from hil.sitl import report
     _, sc = _scenario(tmp_path)
     messages = _recording(sc)
-    monkeypatch.setattr(sitl_report, "read_messages", lambda path: iter(messages))
-    _, dead, _ = sitl_report.analyse_recording(Path("x.mcap"), sc)      # the scenario's kill
+    monkeypatch.setattr(report, "read_messages", lambda path: iter(messages))
+    _, dead, _ = report.analyse_recording(Path("x.mcap"), sc)      # the scenario's kill
     m = dead.summary(sc.name, sc.duration)
     assert m["killed_robots"] == [2] and m["converged"] and m["stuck_robots"] == []
     assert m["max_pose_error"] == pytest.approx(0.125)        # robot 3's belief, vs its truth
-    _, everyone, _ = sitl_report.analyse_recording(Path("x.mcap"), sc, killed={})
+    _, everyone, _ = report.analyse_recording(Path("x.mcap"), sc, killed={})
     m = everyone.summary(sc.name, sc.duration)
     assert m["killed_robots"] == [] and not m["converged"] and m["stuck_robots"] == [2]
     # the dead robot counts for safety: robot 1 driven onto it collides with it
     crowding = _recording(sc, onto_the_dead=5.0)
-    monkeypatch.setattr(sitl_report, "read_messages", lambda path: iter(crowding))
-    _, crowded, _ = sitl_report.analyse_recording(Path("x.mcap"), sc, killed={2: 2.0})
+    monkeypatch.setattr(report, "read_messages", lambda path: iter(crowding))
+    _, crowded, _ = report.analyse_recording(Path("x.mcap"), sc, killed={2: 2.0})
     m = crowded.summary(sc.name, sc.duration)
     assert m["colliding_pairs"] == [(1, 2)] and m["min_pair_distance"] == pytest.approx(0.5)
 

@@ -2,9 +2,8 @@
 from pathlib import Path
 
 import pytest
-
-from hil import uml
-from hil.apt_sources import NoDebianSource, deb822_uris, debian_mirror, one_line_uris
+from tooling import uml
+from tooling.apt_sources import NoDebianSource, deb822_uris, debian_mirror, one_line_uris
 
 ONE_LINE = """\
 # the security archive and a third-party repository come first

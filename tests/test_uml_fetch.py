@@ -1,11 +1,10 @@
-"""Unpacking the Debian packages of a newer UML kernel (hil.uml.fetch), without the network."""
+"""Unpacking the Debian packages of a newer UML kernel (tooling.uml.fetch), without the network."""
 import io
 import os
 import tarfile
 
 import pytest
-
-from hil import uml
+from tooling import uml
 
 
 def ar_archive(members: dict[str, bytes]) -> bytes:

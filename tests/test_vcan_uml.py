@@ -5,8 +5,7 @@ the default 0.1 s."""
 from pathlib import Path
 
 import pytest
-
-from hil import uml
+from tooling import uml
 
 ROOT = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.skipif(uml.usable() is not None,

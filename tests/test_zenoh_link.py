@@ -8,7 +8,7 @@ from helpers import free_port
 
 from common.payloads import StateMsg
 from common.vocabulary import StateFlags
-from hil.processes import wait_until
+from hil.sitl.processes import wait_until
 from transport.zenoh_link import Keys, Latest, Presence, open_session, session_config
 
 
@@ -96,7 +96,7 @@ def test_swarm_link_between_two_agents_and_a_recording(sessions, tmp_path):
     import numpy as np
 
     from common.payloads import MissionMsg, ObstaclesMsg
-    from hil.recorder import Recorder, read_messages
+    from hil.ground.recorder import Recorder, read_messages
     from transport.zenoh_link import SwarmLink
 
     a, b = sessions
