@@ -59,19 +59,6 @@ class Arc(NamedTuple):
     dist: float
 
 
-class Motion(NamedTuple):
-    """This robot's motion over one split (a column of :class:`agent.trail.Splits`)."""
-
-    path: float     # m, walked since the split's start
-    start_x: float  # m, displacement east since its start
-    start_y: float  # m, north
-    start: float    # m, its length
-    end_x: float    # m, displacement east since its end
-    end_y: float    # m, north
-    end: float      # m, its length
-    bulge: float    # m, the half minor axis of the ellipse of where it was within the split
-
-
 class Sight(NamedTuple):
     """This robot's line of sight to a neighbour's report: its distance [m] to the
     report's position and the unit vector toward it, then its distance [m] to the report's
@@ -101,7 +88,6 @@ class Report(NamedTuple):
 
 
 _BLIND = Sight(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)    # no line of sight (needed only with a trail)
-_NO_MOTION = Motion(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 def neighbour_hazard(speed: float, turn: float, age: float, trail: float, m: NeighbourModel,
@@ -166,8 +152,9 @@ def _all_round(trail: Splits, age: float, speed: float, up: float, m: NeighbourM
     since the split's start (:func:`_own_share`, seen along ``sight``)."""
     around = -math.inf
     splits = len(trail.walked)
-    a, accel, top_speed, lag = m.a, m.accel, m.top_speed, m.lag
-    arc = Arc(sight.sx, sight.sy, sight.sx, sight.sy, sight.dist)
+    a, accel, _, top_speed, _, _, _, _, lag, _ = m
+    dist, sx, sy, _, _, _ = sight
+    arc = Arc(sx, sy, sx, sy, dist)
     speed = abs(speed)
     half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
     accel_lag2 = accel_lag * lag
@@ -196,11 +183,12 @@ def _capsule(trail: Splits, age: float, speed: float, turn_rate: float, up: floa
     reach = -math.inf
     rho_age = math.inf
     splits = len(trail.walked)
-    a, half_base = m.a, m.half_base
-    arc = Arc(sight.sx, sight.sy, sight.ex, sight.ey, sight.off)
+    a, accel, half_base, _, _, _, _, _, lag, _ = m
+    _, sx, sy, off, ex, ey = sight
+    arc = Arc(sx, sy, ex, ey, off)
     speed, half_turn = abs(speed), 0.5 * abs(turn_rate)
-    half_accel, half_up, accel_lag = 0.5 * m.accel, 0.5 * up, m.accel * m.lag
-    accel_lag2 = accel_lag * m.lag
+    half_accel, half_up, accel_lag = 0.5 * accel, 0.5 * up, accel * lag
+    accel_lag2 = accel_lag * lag
     for k in range(splits - 1, -1, -1):       # as _all_round
         if k + 1 < splits and trail.dominated[k] != 0.0:
             continue
@@ -230,10 +218,7 @@ def _with_share(trail: Splits, k: int, a: float, radius: float, best: float, arc
     path = trail.walked[k]
     if a + radius + path <= best:
         return best
-    motion = (Motion(path, trail.start_x[k], trail.start_y[k], trail.start_len[k],
-                     trail.end_x[k], trail.end_y[k], trail.end_len[k], trail.bulge[k])
-              if path > 0.0 else _NO_MOTION)
-    bound = a + radius + _own_share(motion, arc, radius)
+    bound = a + radius + (_own_share(trail, k, arc, radius) if path > 0.0 else 0.0)
     return bound if bound > best else best
 
 
@@ -265,20 +250,20 @@ def neighbour_floor(rel_x: float, rel_y: float, speed: float, age: float, path: 
     along the report's segment); behind it, the stop strip leaves more free distance,
     never less (:func:`_ahead`). A few operations: for leaving out the discs that cannot
     bind (agent.governor.binding) before computing them."""
-    accel = m.accel
-    if age > m.staleness or math.isinf(accel):
+    a, accel, _, top_speed, staleness, _, _, speed_up, lag, _ = m
+    if age > staleness or math.isinf(accel):
         return -math.inf, math.inf
-    up = accel if accel < m.speed_up else m.speed_up
-    top = m.a + _travel(speed, age, accel, up, m.lag, m.top_speed) + path + FLOOR_PAD
+    up = accel if accel < speed_up else speed_up
+    top = a + _travel(speed, age, accel, up, lag, top_speed) + path + FLOOR_PAD
     dist = math.sqrt(rel_x * rel_x + rel_y * rel_y)
     return 0.5 * (dist - top) - FLOOR_PAD, top
 
 
-def _own_share(motion: Motion, arc: Arc, radius: float) -> float:
+def _own_share(trail: Splits, k: int, arc: Arc, radius: float) -> float:
     """How much [m] of the gap to a neighbour this robot's own motion takes from its half,
-    the neighbour having last acted within a split of its data's age over which this
-    robot moved by ``motion``, at a point within ``radius`` [m] of a set this robot sees
-    along ``arc``.
+    the neighbour having last acted within split ``k`` of its data's age (this robot's
+    motion over it: the split's column of ``trail``), at a point within ``radius`` [m] of a
+    set this robot sees along ``arc``.
 
     The neighbour then at q, this robot at p0, kept its stop within half of |q - p0|
     beyond a; this robot, now at p with D = p - p0, must keep its stop within
@@ -289,31 +274,32 @@ def _own_share(motion: Motion, arc: Arc, radius: float) -> float:
     length l between where it was at the split's start and end, so within the ellipse
     of those foci and l: x.D is at most the larger of x.D at the two ends plus the
     ellipse's half minor axis, and x is within the arc widened by asin(radius / dist)."""
-    path = motion.path
+    path = trail.walked[k]
     if path <= 0.0:
         return 0.0
-    dist = arc.dist
+    sx, sy, ex, ey, dist = arc
     clear = dist - radius                  # m, the least r
     if clear <= EPS:
         return path
     sin_b = radius / dist                  # the set's points lie within asin(sin_b)
     sin_b = 1.0 if 1.0 < sin_b else sin_b
     cos_b = math.sqrt(1.0 - sin_b * sin_b)
-    toward = _toward(motion.start_x, motion.start_y, motion.start, arc, cos_b, sin_b)
-    toward_end = _toward(motion.end_x, motion.end_y, motion.end, arc, cos_b, sin_b)
+    toward = _toward(trail.start_x[k], trail.start_y[k], trail.start_len[k], sx, sy, ex, ey,
+                     cos_b, sin_b)
+    toward_end = _toward(trail.end_x[k], trail.end_y[k], trail.end_len[k], sx, sy, ex, ey,
+                         cos_b, sin_b)
     toward = toward_end if toward_end > toward else toward
-    share = toward + motion.bulge + 0.5 * path * path / clear
+    share = toward + trail.bulge[k] + 0.5 * path * path / clear
     share = share if share > 0.0 else 0.0
     return share if share < path else path
 
 
-def _toward(dx: float, dy: float, size: float, arc: Arc, cos_b: float, sin_b: float
-            ) -> float:
+def _toward(dx: float, dy: float, size: float, sx: float, sy: float, ex: float, ey: float,
+            cos_b: float, sin_b: float) -> float:
     """The largest component [m] of (``dx``, ``dy``) [m] (of length ``size``) along a
     direction within an angle b (its cosine ``cos_b`` and sine ``sin_b``) of ``arc``."""
     if size <= 0.0:
         return 0.0
-    sx, sy, ex, ey = arc.sx, arc.sy, arc.ex, arc.ey
     turn = sx * ey - sy * ex
     if (turn != 0.0 and turn * (sx * dy - sy * dx) >= 0.0
             and turn * (dx * ey - dy * ex) >= 0.0 and dx * (sx + ex) + dy * (sy + ey) > 0.0):
@@ -353,10 +339,10 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     room, still centred on the capsule's nearest point; silent, the static disc round the
     reported position. Behind a neighbour driving away, where it can be and stop bounds
     its stop better than its claim does (:func:`_ahead`)."""
-    accel = m.accel
-    if age > m.staleness or math.isinf(accel):
+    a, accel, half_base, top_speed, staleness, _, _, speed_up, lag, turn_up = m
+    if age > staleness or math.isinf(accel):
         nearer = approach(rel_x, rel_y, heading, speed, turn_rate, age, m)
-        full, half = neighbour_hazard(speed, m.half_base * abs(turn_rate), age,
+        full, half = neighbour_hazard(speed, half_base * abs(turn_rate), age,
                                       trail.walked[0], m, nearer)
         return Disc(full, half, 0.0, 0.0, half)
     hx, hy = math.cos(heading), math.sin(heading)
@@ -368,15 +354,15 @@ def neighbour_radii(rel_x: float, rel_y: float, heading: float, speed: float,
     near = EPS if EPS > dist else dist
     far = EPS if EPS > far else far
     sight = Sight(dist, -rel_x / near, -rel_y / near, off, far_x / far, far_y / far)
-    up = accel if accel < m.speed_up else m.speed_up
-    turn_up = up if up < m.turn_up else m.turn_up
+    up = accel if accel < speed_up else speed_up
+    turn_up = up if up < turn_up else turn_up
     reach, rho = _capsule(trail, age, speed, turn_rate, up, turn_up, m, sight)
     beyond = off - reach
     # the all-round bound leaves more room than the capsule only where even its least
     # value, its last split's travel without this robot's share, does; else it is not
     # computed (its splits' shares are half the disc's cost)
     splits = len(trail.walked)
-    least = m.a + _travel(speed, age * splits / splits, accel, up, m.lag, m.top_speed)
+    least = a + _travel(speed, age * splits / splits, accel, up, lag, top_speed)
     if dist - least > beyond:
         within = dist - _all_round(trail, age, speed, up, m, sight)
         beyond = within if within > beyond else beyond
@@ -402,22 +388,21 @@ def _ahead(report: Report, up: float, turn_up: float, m: NeighbourModel, rho: fl
     of the gap, which the neighbour counts on when it acts again, measured from the part
     of the report's segment the neighbour can be on by now. The cheap bounds come first:
     an agent runs this for every neighbour every period."""
-    speed, age, a = report.speed, report.age, m.a
+    rel_x, rel_y, rel, hx, hy, speed, turn_rate, age = report
+    a, accel, half_base = m.a, m.accel, m.half_base
     v = abs(speed)
     none = (free, 0.0, 0.0, 0.0)
-    if v <= 0.0 or m.half_base <= 0.0:
+    if v <= 0.0 or half_base <= 0.0:
         return none
-    hx, hy = report.hx, report.hy
     if speed < 0.0:
         hx, hy = -hx, -hy
-    rel_x, rel_y = report.rel_x, report.rel_y
     ahead = rel_x * hx + rel_y * hy             # m, this robot along the report
     # not behind its braking distance; or its half can be no more than the claim's, half
     # the gap to the segment's far end beyond rho and a
-    if (ahead >= v * v / (2.0 * m.accel)
-            or report.rel + v * age - rho - a <= 2.0 * free):
+    if (ahead >= v * v / (2.0 * accel)
+            or rel + v * age - rho - a <= 2.0 * free):
         return none
-    now = _progress(v, report.turn_rate, age, up, turn_up, m)
+    now = _progress(v, turn_rate, age, up, turn_up, m)
     along = 0.0 if 0.0 > now else now                 # on the report's segment, by now
     along = along if along > ahead else ahead
     along = v * age if v * age < along else along
@@ -426,7 +411,7 @@ def _ahead(report: Report, up: float, turn_up: float, m: NeighbourModel, rho: fl
     half = 0.5 * (dist - rho - a)
     if now == -math.inf or dist <= EPS or half <= free:
         return none
-    lo, across = _strip(now, v, report.turn_rate, age, up, turn_up, m)
+    lo, across = _strip(now, v, turn_rate, age, up, turn_up, m)
     if ahead >= lo:
         return none
     bx, by = ox / dist, oy / dist

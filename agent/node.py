@@ -142,6 +142,7 @@ class Agent:
                                            # last period
         self._ws = _workspace(0)
         self.periods = periods
+        self._detected: tuple[ObstaclesMsg, Detections] | None = None   # the last message
         self._period: tuple[Inputs, Memory, PeriodOut] | None = None   # to record
         self.progress = ProgressWatch(settings.timeouts.deadlock)
         self.deadlock: str | None = None   # why the robot is deadlocked, if it is
@@ -432,12 +433,15 @@ class Agent:
                           [m.x for m in msgs], [m.y for m in msgs], [m.theta for m in msgs],
                           [m.v for m in msgs], [m.u for m in msgs], [m.slot for m in msgs],
                           [m.partner for m in msgs], [m.other for m in msgs])
-        if detections is not None:
+        if detections is None:
+            seen = Detections([], [], [], 0)
+        elif self._detected is not None and self._detected[0] is detections:
+            seen = self._detected[1]            # the same message: converted once
+        else:
             seen = Detections(detections.centers[:, 0].tolist(),
                               detections.centers[:, 1].tolist(), detections.radii.tolist(),
                               len(detections.radii))
-        else:
-            seen = Detections([], [], [], 0)
+            self._detected = (detections, seen)
         grow = self.fusion.uncertainty if self.fusion is not None else 0.0    # m
         own = Own(self.s.robot_id, pose[0], pose[1], pose[2], grow, *self._jump)
         return Inputs(own, now_w, t, dt, reports, list(range(n)), n, seen, places,

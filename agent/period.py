@@ -56,7 +56,7 @@ from agent.law import (
     pair_active,
 )
 from agent.neighbours import Reports, extrapolate
-from agent.trail import OwnPath, Splits, own_motion, path_since
+from agent.trail import TIME_TOL, OwnPath, Splits, own_motion, path_since
 
 if TYPE_CHECKING:
     from agent.avoidance import FloatBuf, FloatSeq, IntBuf, IntSeq
@@ -197,45 +197,55 @@ def sense(inputs: Inputs, p: PeriodParams, ws: Workspace) -> tuple[int, int, int
     by now, its report within the range plus the top speed times its data's age (the
     staleness limit at most), a hazard of the governor. Its own row and rows never heard
     from are passed over."""
-    own, rep, m = inputs.own, inputs.reports, p.model
-    x, y = own.x, own.y
+    # the columns as locals: the same numbers, fewer lookups (an agent runs this
+    # interpreted every period)
+    own, rep = inputs.own, inputs.reports
+    robots, stamps, xs, ys, vs = rep.robot, rep.stamp, rep.x, rep.y, rep.v
+    me, x, y, now = own.robot, own.x, own.y, inputs.now
+    staleness, half_base, top_speed = p.model.staleness, p.model.half_base, p.model.top_speed
+    obs_x, obs_y, obs_r = ws.obs_x, ws.obs_y, ws.obs_r
+    nbr_x, nbr_y, nbr_row, nbr_grow, nbr_held = (ws.nbr_x, ws.nbr_y, ws.nbr_row, ws.nbr_grow,
+                                                 ws.nbr_held)
+    near, held_ids, n_held = inputs.near, inputs.held, inputs.n_held
     r = p.sensing_range
     r2 = r * r
     det = inputs.detections
     for k in range(det.n):
-        ws.obs_x[k], ws.obs_y[k], ws.obs_r[k] = det.x[k], det.y[k], det.r[k]
+        obs_x[k], obs_y[k], obs_r[k] = det.x[k], det.y[k], det.r[k]
     n_nbr, n_obs, n_cand = 0, det.n, 0
     for q in range(inputs.n_near):
-        row = inputs.near[q]
-        stamp = rep.stamp[row]
-        if rep.robot[row] == own.robot or stamp == -math.inf:
+        row = near[q]
+        stamp = stamps[row]
+        robot = robots[row]
+        if robot == me or stamp == -math.inf:
             continue
-        age = inputs.now - stamp
-        dx, dy = rep.x[row] - x, rep.y[row] - y
+        age = now - stamp
+        rx, ry = xs[row], ys[row]
+        dx, dy = rx - x, ry - y
         d2 = dx * dx + dy * dy
         law_q = -1
-        if age > m.staleness:          # silent: a static obstacle where it was last
+        if age > staleness:            # silent: a static obstacle where it was last
             if d2 <= r2:
-                ws.obs_x[n_obs], ws.obs_y[n_obs] = rep.x[row], rep.y[row]
-                ws.obs_r[n_obs] = silent_radius(rep.v[row], m.half_base * rep.u[row], m)
+                obs_x[n_obs], obs_y[n_obs] = rx, ry
+                obs_r[n_obs] = silent_radius(vs[row], half_base * rep.u[row], p.model)
                 n_obs += 1
-        elif math.sqrt(d2) - abs(rep.v[row]) * (0.0 if 0.0 > age else age) <= r + RANGE_PAD:
+        elif math.sqrt(d2) - abs(vs[row]) * (0.0 if 0.0 > age else age) <= r + RANGE_PAD:
             # in range wherever its arc took it (an arc is at least as long as its chord)
-            px, py, _ = extrapolate(rep.x[row], rep.y[row], rep.theta[row], rep.v[row],
-                                    rep.u[row], age, m.staleness)
+            px, py, _ = extrapolate(rx, ry, rep.theta[row], vs[row], rep.u[row], age,
+                                    staleness)
             ex, ey = px - x, py - y
             if ex * ex + ey * ey <= r2:
                 law_q = n_nbr
-                ws.nbr_x[n_nbr], ws.nbr_y[n_nbr], ws.nbr_row[n_nbr] = px, py, row
-                ws.nbr_grow[n_nbr] = 0.0
+                nbr_x[n_nbr], nbr_y[n_nbr], nbr_row[n_nbr] = px, py, row
+                nbr_grow[n_nbr] = 0.0
                 held = 0.0
-                for h in range(inputs.n_held):
-                    if inputs.held[h] == rep.robot[row]:
+                for h in range(n_held):
+                    if held_ids[h] == robot:
                         held = 1.0
-                ws.nbr_held[n_nbr] = held
+                nbr_held[n_nbr] = held
                 n_nbr += 1
-        since = 0.0 if 0.0 > age else (m.staleness if age > m.staleness else age)
-        reach = r + m.top_speed * since
+        since = 0.0 if 0.0 > age else (staleness if age > staleness else age)
+        reach = r + top_speed * since
         if d2 <= reach * reach:
             ws.cand_row[n_cand], ws.cand_law[n_cand] = row, law_q
             n_cand += 1
@@ -273,7 +283,10 @@ def governor_limits(inputs: Inputs, law_mem: LawMemory, n_cand: int, p: PeriodPa
     neighbour's growth (``ws.nbr_grow``) is its claim's half radius less a, which the law
     passes round (A13), or, where its disc was not computed, a bound of it."""
     own, rep, path, m, lp = inputs.own, inputs.reports, inputs.path, p.model, p.law
-    x, y, now, a = own.x, own.y, inputs.now, m.a
+    stamps, xs, ys, vs = rep.stamp, rep.x, rep.y, rep.v
+    cand_row, cand_law, cand_floor, order = ws.cand_row, ws.cand_law, ws.cand_floor, ws.order
+    nbr_grow = ws.nbr_grow
+    x, y, now, a, staleness = own.x, own.y, inputs.now, m.a, m.staleness
     grow = own.uncertainty
     v_now, u_now = last_velocity(law_mem, lp)
     frame = limit_frame(own.theta, v_now, u_now, braking_of(lp, inputs.dt))
@@ -283,47 +296,48 @@ def governor_limits(inputs: Inputs, law_mem: LawMemory, n_cand: int, p: PeriodPa
         gaps = fold_hazard(gaps, frame, det.x[k] - x, det.y[k] - y, det.r[k] + a + grow,
                            -math.inf, 0.0)
     # the floors, and the neighbours in their order (insertion: a few, no allocation)
-    walked_stamp, walked = math.nan, 0.0
+    walked, lo, hi = 0.0, math.inf, -math.inf
     for c in range(n_cand):
-        row = ws.cand_row[c]
-        stamp = rep.stamp[row]
-        if stamp != walked_stamp:       # this robot's path since the stamp
-            walked_stamp, walked = stamp, path_since(path, stamp)
-        floor, top = neighbour_floor(x - rep.x[row], y - rep.y[row], rep.v[row], now - stamp,
-                                     walked, m)
+        row = cand_row[c]
+        stamp = stamps[row]
+        if not lo <= stamp + TIME_TOL < hi:     # this robot's path since the stamp (the
+            walked, lo, hi = path_since(path, stamp)   # same for stamps between two records)
+        floor, top = neighbour_floor(x - xs[row], y - ys[row], vs[row], now - stamp, walked,
+                                     m)
         floor -= 0.5 * grow
-        ws.cand_floor[c] = floor
-        q = ws.cand_law[c]
+        cand_floor[c] = floor
+        q = cand_law[c]
         if q >= 0:
-            ws.nbr_grow[q] = top + grow - a
+            nbr_grow[q] = top + grow - a
         i = c
-        while i > 0 and ws.cand_floor[ws.order[i - 1]] > floor:
-            ws.order[i] = ws.order[i - 1]
+        while i > 0 and cand_floor[order[i - 1]] > floor:
+            order[i] = order[i - 1]
             i -= 1
-        ws.order[i] = c
+        order[i] = c
     bind = binding(gaps, frame)
     ws.key[0] = -1
     for i in range(n_cand):
-        c = ws.order[i]
-        q = ws.cand_law[c]
-        if ws.cand_floor[c] >= bind:        # it cannot bind: is it one the law may pass?
+        c = order[i]
+        q = cand_law[c]
+        if cand_floor[c] >= bind:           # it cannot bind: is it one the law may pass?
             if q < 0:
                 continue
             dx, dy = ws.nbr_x[q] - x, ws.nbr_y[q] - y
-            if not may_pass(math.sqrt(dx * dx + dy * dy), ws.nbr_grow[q], lp):
+            if not may_pass(math.sqrt(dx * dx + dy * dy), nbr_grow[q], lp):
                 continue
-        row = ws.cand_row[c]
-        stamp = rep.stamp[row]
+        row = cand_row[c]
+        stamp = stamps[row]
         age = now - stamp
         # this robot's motion since the stamp, split as the discs take it (neighbours
         # whose splits fall between the same records share it)
         own_motion(path, stamp, age, ws.key, ws.splits)
-        disc = neighbour_radii(x - rep.x[row], y - rep.y[row], rep.theta[row], rep.v[row],
-                               rep.u[row], age, ws.splits, m)
-        gaps = fold_hazard(gaps, frame, rep.x[row] + disc.east - x,
-                           rep.y[row] + disc.north - y, disc.full + grow, disc.half + grow,
-                           1.0 if age <= m.staleness else 0.0)
+        rx, ry = xs[row], ys[row]
+        full, half, east, north, claim = neighbour_radii(x - rx, y - ry, rep.theta[row],
+                                                         vs[row], rep.u[row], age, ws.splits,
+                                                         m)
+        gaps = fold_hazard(gaps, frame, rx + east - x, ry + north - y, full + grow,
+                           half + grow, 1.0 if age <= staleness else 0.0)
         bind = binding(gaps, frame)
         if q >= 0:
-            ws.nbr_grow[q] = disc.claim + grow - a
+            nbr_grow[q] = claim + grow - a
     return frame_limits(gaps, frame)

@@ -102,14 +102,21 @@ def at_or_before(path: OwnPath, when: float) -> int:
     return i
 
 
-def path_since(path: OwnPath, start: float) -> float:
-    """The path [m] to the newest position from the last one recorded at or before
-    ``start`` [s] (the oldest, if none; 0 before any): :func:`own_motion`'s first value."""
-    if path.n == 0:
-        return 0.0
-    first, size = path.first, path.size
-    newest = path.walked[(first + path.n - 1) % size]
-    return newest - path.walked[(first + at_or_before(path, start)) % size]
+def path_since(path: OwnPath, start: float) -> tuple[float, float, float]:
+    """(walked, lo, hi): the path [m] to the newest position from the last one recorded at
+    or before ``start`` [s] (the oldest, if none; 0 before any), :func:`own_motion`'s first
+    value; and the same for every time whose TIME_TOL later lies in [lo, hi) [s]: the
+    record's time and the next one's (-inf, inf at the ends), for a caller that asks
+    again."""
+    n = path.n
+    if n == 0:
+        return 0.0, -math.inf, math.inf
+    t, first, size = path.t, path.first, path.size
+    i = at_or_before(path, start)
+    j = (first + i) % size
+    lo = t[j] if i > 0 or t[j] <= start + TIME_TOL else -math.inf
+    hi = t[(first + i + 1) % size] if i < n - 1 else math.inf
+    return path.walked[(first + n - 1) % size] - path.walked[j], lo, hi
 
 
 def own_motion(path: OwnPath, start: float, span: float, key: IntBuf, out: Splits) -> None:

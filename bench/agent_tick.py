@@ -4,7 +4,8 @@ An agent (agent.node.Agent, interpreted as on a robot computer) on in-memory por
 (tests/fakes.py) ticks on simulated time among 20 neighbours whose states are refreshed every
 period and 3 obstacle detections; prints the median and the 99th percentile of the tick's
 wall time. Uses only the agent's public API, so it runs unchanged on older commits
-(bench/side_by_side.py).
+(bench/side_by_side.py --this-script). The start-up objects are frozen out of the garbage
+collector's reach before the ticks, as the agent process does.
 
 With ``--governor-cost`` a second agent, the same but with the safety governor off
 (``[control] governor = false``), ticks among the same neighbours in alternation, so both
@@ -23,6 +24,7 @@ motion for each neighbour it computes a disc for).
 from __future__ import annotations
 
 import argparse
+import gc
 import logging
 import math
 import sys
@@ -112,6 +114,7 @@ def main() -> None:
         agents["governor off"] = make_agent(clock, net, False, robot)
     times: dict[str, list[int]] = {name: [] for name in agents}
     order = list(agents)
+    gc.freeze()          # as the agent process does after start-up (agent.process)
     for k in range(args.ticks):
         order.reverse()                  # neither agent always ticks first
         for name in order:

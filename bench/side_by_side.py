@@ -6,7 +6,9 @@ The machine is shared and its speed drifts over minutes, so figures of two commi
 comparable when measured in the same run, interleaved: this checks REV out into a temporary
 git worktree, then runs ``SCRIPT ARGS`` from each checkout in turn (each importing its own
 code: PYTHONPATH is the checkout; a script the other commit lacks is taken from this one),
-``--rounds`` times, printing each output under a header.
+``--rounds`` times, printing each output under a header. ``--this-script`` runs this
+checkout's script on both (a benchmark improved since REV, on REV's code: it must use only
+what both commits have).
 The worktree is removed at the end, also on failure or Ctrl-C.
 """
 from __future__ import annotations
@@ -23,10 +25,10 @@ from typing import Iterator
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def run_in(checkout: Path, script: list[str]) -> str:
+def run_in(checkout: Path, script: list[str], this_script: bool = False) -> str:
     """Run ``script`` with ``checkout``'s code; a script the checkout does not have (a
-    benchmark newer than it) is taken from this one."""
-    if not (checkout / script[0]).exists():
+    benchmark newer than it), or any with ``this_script``, is taken from this one."""
+    if this_script or not (checkout / script[0]).exists():
         script = [str(ROOT / script[0]), *script[1:]]
     env = dict(os.environ, PYTHONPATH=str(checkout))
     done = subprocess.run([sys.executable, *script], cwd=checkout, env=env,
@@ -61,6 +63,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("rev", help="the other commit (hash, tag, branch)")
     ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--this-script", action="store_true",
+                    help="run this checkout's benchmark script on both commits")
     argv = sys.argv[1:]
     if "--" not in argv or argv.index("--") == len(argv) - 1:
         ap.error("give the benchmark after --, e.g. -- bench/batch_scaling.py")
@@ -71,7 +75,7 @@ def main() -> None:
         for r in range(args.rounds):
             for name, checkout in ((label, other), ("this checkout", ROOT)):
                 print(f"=== round {r + 1}, {name}: {' '.join(script)}", flush=True)
-                print(run_in(checkout, script), flush=True)
+                print(run_in(checkout, script, args.this_script), flush=True)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,6 @@ from hypothesis import strategies as st
 from agent.braking import stopping
 from agent.discs import (
     Arc,
-    Motion,
     Sight,
     _all_round,
     _capsule,
@@ -120,9 +119,7 @@ def test_this_robot_s_share_of_its_own_motion_keeps_two_stops_apart(pts, moves, 
              for pt in (s, e)]
     trail = splits_of(([path], [path - within], [p[0] - start[0]], [p[1] - start[1]],
                        [p[0] - w[0]], [p[1] - w[1]]))
-    motion = Motion(path, trail.start_x[0], trail.start_y[0], trail.start_len[0],
-                    trail.end_x[0], trail.end_y[0], trail.end_len[0], trail.bulge[0])
-    share = _own_share(motion, Arc(*units[0], *units[1], off), g)
+    share = _own_share(trail, 0, Arc(*units[0], *units[1], off), g)
     assert 0.0 <= share <= path
     own = 0.5 * (off - A - g - share)
     theirs = 0.5 * (dist(q, p0) - A)

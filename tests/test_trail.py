@@ -7,6 +7,7 @@ import random
 import pytest
 
 from agent.trail import (
+    TIME_TOL,
     OwnPath,
     Splits,
     Trail,
@@ -29,7 +30,7 @@ def splits(path: OwnPath, start: float, span: float, pieces: int) -> Splits:
 
 def since(trail: Trail, t: float) -> float:
     """The path [m] from the position at or before t [s] to the newest."""
-    return path_since(trail.path(), t)
+    return path_since(trail.path(), t)[0]
 
 
 def test_the_path_since_a_time_is_walked_from_the_position_at_or_before_it():
@@ -113,14 +114,19 @@ def test_path_since_is_the_first_value_of_the_splits_bit_for_bit():
     for the discs it computes: both must agree exactly, at and between recorded times."""
     rng = random.Random(3)
     trail = Trail(1.0)
-    assert path_since(trail.path(), 0.0) == splits(trail.path(), 0.0, 0.1, 4).walked[0] == 0.0
+    assert since(trail, 0.0) == splits(trail.path(), 0.0, 0.1, 4).walked[0] == 0.0
     t = 0.0
     for _ in range(300):
         t += rng.choice((0.01, 0.02, 0.013))
         trail.record(t, rng.uniform(-5, 5), rng.uniform(-5, 5))
         for start in (t - 0.5, t - 0.02, t - rng.uniform(0, 0.7), t, t - 0.013):
             path = trail.path()
-            assert path_since(path, start) == splits(path, start, t - start, 4).walked[0]
+            walked, lo, hi = path_since(path, start)
+            assert walked == splits(path, start, t - start, 4).walked[0]
+            # every time between the same records has that path (the governor asks once)
+            for other in (lo - TIME_TOL, 0.5 * (lo + hi) - TIME_TOL, hi - 2 * TIME_TOL):
+                if math.isfinite(other):
+                    assert path_since(path, other)[0] == walked
 
 
 def test_a_boundary_at_a_recorded_time_takes_that_record_both_ways():
