@@ -48,6 +48,9 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--startup-timeout", type=positive, default=40.0, metavar="S",
                    help="seconds for the plant, then for every agent, to come up (a loaded "
                         "machine starts dozens of Python processes slowly)")
+    p.add_argument("--record-periods", action="store_true",
+                   help="each agent records every period it runs (what it knew and did) in "
+                        "OUT/periods/robot_<id>.periods, for replay (docs/formats.md)")
     p.add_argument("--near-radius", type=float, default=0.0, metavar="M",
                    help="agents take full-rate states only from robots within M metres "
                         "and 5 Hz beacons from the rest (0: every robot at full rate)")
@@ -125,7 +128,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
                        mavlink_key=_mavlink_key(args.mavlink_key),
                        realtime_priority=args.realtime_priority,
                        startup_timeout=args.startup_timeout,
-                       robot_profile=str(Path(profile).resolve()) if profile else None)
+                       robot_profile=str(Path(profile).resolve()) if profile else None,
+                       record_periods=args.record_periods)
     if problem := near_radius_problem(opts.near_radius, sc.sensing_range):
         raise BadInput(f"--near-radius {problem}")
     state_envelope(console, sc)

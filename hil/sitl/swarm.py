@@ -94,6 +94,7 @@ class SitlOptions:
     lead_time: float = 1.5              # s between the mission message and its epoch
     live: bool = True                   # live status table on a terminal
     robot_profile: str | None = None    # absolute path of the robot profile the plants use
+    record_periods: bool = False        # each agent records its periods in periods/
     launch: LaunchSettings = field(default_factory=LaunchSettings)   # router, age bound
 
 
@@ -252,6 +253,11 @@ def run_sitl(sc: Scenario, out: Path, opts: SitlOptions, console: Console) -> Si
             mav_port = free_udp_port()               # nobody listens: telemetry is dropped
         settings = [agent_settings(sc, i, swarm, endpoint, opts, mav_port)
                     for i in range(len(sc.ids))]
+        if opts.record_periods:               # agent.period_log, one file per robot
+            (out / "periods").mkdir(exist_ok=True)
+            settings = [dataclasses.replace(s, record_periods=str(
+                (out / "periods" / f"robot_{s.robot_id}.periods").resolve()))
+                for s in settings]
         for s in settings:
             (config_dir / f"robot_{s.robot_id}.toml").write_text(to_toml(s))
         _write_manifest(out, sc, settings, endpoint, swarm, {"router": router_pid})
